@@ -1,0 +1,18 @@
+"""User-facing errors.
+
+Every mistake a user can make (bad file, bad key, bad value) raises a
+:class:`GpusimError` whose message is one line naming the problem and the fix.
+The CLI prints it without a traceback and exits non-zero.
+"""
+
+
+class GpusimError(Exception):
+    """A problem with the user's input, reported as one line."""
+
+
+class ConfigError(GpusimError):
+    """A configuration file or override names an unknown key or an invalid value."""
+
+
+class TraceError(GpusimError):
+    """A fragment trace is malformed, truncated or out of range."""

@@ -1,0 +1,136 @@
+"""Importing fragment traces from CSV.
+
+Format: a header line ``x,y,z,r,g,b,a`` with optional ``prim`` and ``opaque``
+columns (any order), then one row per fragment in submission order. ``x`` and
+``y`` are integer pixel coordinates (OpenGL window convention, row 0 at the
+bottom); ``z`` is window depth in [0, 1]; colour and alpha are floats in [0, 1].
+A missing ``prim`` column makes each row its own primitive; a missing
+``opaque`` column makes every fragment transparent. ``opaque`` accepts 0/1 or
+true/false.
+
+The file is read in chunks into arrays allocated once for the whole trace, so
+memory stays near the size of the finished trace.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from gpusim.errors import TraceError
+from gpusim.trace import DTYPES, FragmentTrace
+
+REQUIRED = ("x", "y", "z", "r", "g", "b", "a")
+OPTIONAL = ("prim", "opaque")
+CHUNK_ROWS = 1 << 20
+
+
+def _count_rows(path: Path) -> int:
+    """Number of data rows (non-empty lines after the header), counted in binary blocks."""
+    lines, last = 0, b"\n"
+    with open(path, "rb") as handle:
+        while block := handle.read(1 << 24):
+            lines += block.count(b"\n")
+            last = block[-1:]
+    if last != b"\n":
+        lines += 1
+    return max(lines - 1, 0)
+
+
+def _numeric(chunk: pd.DataFrame, column: str, path: Path, first_row: int) -> np.ndarray:
+    series = chunk[column]
+    if series.dtype == object or series.dtype == bool and column != "opaque":
+        coerced = pd.to_numeric(series, errors="coerce")
+        bad = np.flatnonzero(coerced.isna().to_numpy())
+        if bad.size:
+            line = first_row + int(bad[0]) + 2
+            raise TraceError(f"{path}:{line}: column '{column}' holds {series.iloc[bad[0]]!r}, "
+                             "not a number; fix that row")
+        series = coerced
+    values = series.to_numpy(dtype=np.float64, na_value=np.nan)
+    missing = np.flatnonzero(np.isnan(values))
+    if missing.size:
+        line = first_row + int(missing[0]) + 2
+        raise TraceError(f"{path}:{line}: column '{column}' is empty or NaN; every fragment needs "
+                         "a number there")
+    return values
+
+
+def _integers(values: np.ndarray, column: str, limit: int, path: Path, first_row: int) -> np.ndarray:
+    bad = np.flatnonzero((values != np.floor(values)) | (values < 0) | (values >= limit))
+    if bad.size:
+        line = first_row + int(bad[0]) + 2
+        raise TraceError(f"{path}:{line}: {column}={values[bad[0]]:g} is not an integer in "
+                         f"0..{limit - 1}; fix the row or give a larger --size")
+    return values
+
+
+def _opaque(chunk: pd.DataFrame, path: Path, first_row: int) -> np.ndarray:
+    series = chunk["opaque"]
+    if series.dtype == bool:
+        return series.to_numpy()
+    text = series.astype(str).str.strip().str.lower()
+    mapped = text.map({"1": True, "0": False, "true": True, "false": False,
+                       "1.0": True, "0.0": False})
+    bad = np.flatnonzero(mapped.isna().to_numpy())
+    if bad.size:
+        line = first_row + int(bad[0]) + 2
+        raise TraceError(f"{path}:{line}: opaque={series.iloc[bad[0]]!r} is not 0/1 or true/false")
+    return mapped.to_numpy(dtype=bool)
+
+
+def read_csv_trace(path: str | os.PathLike, width: int, height: int,
+                   meta: dict | None = None) -> FragmentTrace:
+    """Read a CSV fragment list (format in the module docstring) into a FragmentTrace."""
+    path = Path(path)
+    if not path.is_file():
+        raise TraceError(f"{path}: no such CSV file; check the path")
+    try:
+        header = pd.read_csv(path, nrows=0).columns
+    except (pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise TraceError(f"{path}: not a CSV file with a header line x,y,z,r,g,b,a ({exc})") from None
+    columns = [str(c).strip() for c in header]
+    missing = [c for c in REQUIRED if c not in columns]
+    if missing:
+        raise TraceError(f"{path}: missing column(s) {', '.join(missing)}; the header must hold "
+                         f"x,y,z,r,g,b,a (optional: prim, opaque)")
+    unknown = [c for c in columns if c not in REQUIRED + OPTIONAL]
+    if unknown:
+        raise TraceError(f"{path}: unknown column(s) {', '.join(unknown)}; valid columns are "
+                         f"{', '.join(REQUIRED + OPTIONAL)}")
+    if len(set(columns)) != len(columns):
+        raise TraceError(f"{path}: a column name appears twice in the header; keep one of each")
+
+    n = _count_rows(path)
+    out = {name: np.empty((n, 4) if name == "rgba" else n, dtype=dt) for name, dt in DTYPES.items()}
+    pos = 0
+    try:
+        reader = pd.read_csv(path, chunksize=CHUNK_ROWS, skipinitialspace=True,
+                             skip_blank_lines=True, names=columns, header=0)
+        for chunk in reader:
+            rows = len(chunk)
+            if pos + rows > n:
+                raise TraceError(f"{path}: the file changed while it was read; try again")
+            sl = slice(pos, pos + rows)
+            out["x"][sl] = _integers(_numeric(chunk, "x", path, pos), "x", width, path, pos)
+            out["y"][sl] = _integers(_numeric(chunk, "y", path, pos), "y", height, path, pos)
+            out["z"][sl] = _numeric(chunk, "z", path, pos)
+            for i, c in enumerate("rgba"):
+                out["rgba"][sl, i] = _numeric(chunk, c, path, pos)
+            if "prim" in columns:
+                prim = _numeric(chunk, "prim", path, pos)
+                out["prim"][sl] = _integers(prim, "prim", 2**32, path, pos)
+            else:
+                out["prim"][sl] = np.arange(pos, pos + rows, dtype=np.uint32)
+            out["opaque"][sl] = _opaque(chunk, path, pos) if "opaque" in columns else False
+            pos += rows
+    except pd.errors.ParserError as exc:
+        raise TraceError(f"{path}: malformed CSV ({str(exc).strip()}); every row needs "
+                         f"{len(columns)} fields") from None
+    if pos != n:  # blank lines were skipped: trim the arrays (views, no copy)
+        out = {k: v[:pos] for k, v in out.items()}
+    meta = {"generator": "gpusim trace --from-csv", "source_csv": path.name, **(meta or {})}
+    return FragmentTrace(**out, width=width, height=height, meta=meta, source=str(path))

@@ -1,0 +1,71 @@
+"""Saving and loading fragment traces as ``.npz`` files.
+
+Layout (format version 1): one uncompressed zip member per array of
+:data:`gpusim.trace.DTYPES`, plus ``format_version`` (int64 scalar), ``width``,
+``height`` (int64 scalars) and ``meta_json`` (a unicode scalar holding the
+metadata as JSON). Pickle is never used. Each array is read straight into its
+final numpy buffer, so loading needs the trace's size in memory once.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from gpusim.atomic_io import atomic_output
+from gpusim.errors import TraceError
+from gpusim.trace import DTYPES, FragmentTrace
+
+FORMAT_VERSION = 1
+_SCALARS = ("format_version", "width", "height", "meta_json")
+
+
+def save_trace(trace: FragmentTrace, path: str | os.PathLike) -> Path:
+    """Write ``trace`` to ``path`` (``.npz``) atomically; returns the path."""
+    path = Path(path)
+    if path.suffix != ".npz":
+        raise TraceError(f"{path}: a trace file must end in .npz; name the output like trace.npz")
+    arrays = {name: getattr(trace, name) for name in DTYPES}
+    with atomic_output(path) as handle:
+        np.savez(handle, format_version=np.int64(FORMAT_VERSION), width=np.int64(trace.width),
+                 height=np.int64(trace.height), meta_json=np.str_(json.dumps(trace.meta)),
+                 **arrays)
+    return path
+
+
+def load_trace(path: str | os.PathLike) -> FragmentTrace:
+    """Load and validate a trace; raise :class:`TraceError` with one clear line on any problem."""
+    path = Path(path)
+    fix = "re-create it with 'gpusim trace'"
+    if not path.is_file():
+        raise TraceError(f"{path}: no such trace file; check the path or create one with 'gpusim trace'")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            members = set(npz.files)
+            for name in (*_SCALARS, *DTYPES):
+                if name not in members:
+                    raise TraceError(f"{path}: not a gpusim trace, array '{name}' is missing; {fix}")
+            version = int(npz["format_version"])
+            if version > FORMAT_VERSION:
+                raise TraceError(f"{path}: trace format version {version} is newer than this gpusim "
+                                 f"reads ({FORMAT_VERSION}); upgrade gpusim")
+            if version < 1:
+                raise TraceError(f"{path}: invalid trace format version {version}; {fix}")
+            width, height = int(npz["width"]), int(npz["height"])
+            meta = json.loads(str(npz["meta_json"]))
+            arrays = {name: npz[name] for name in DTYPES}
+    except TraceError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        raise TraceError(f"{path}: truncated or corrupted trace file ({exc}); {fix}") from None
+    except (ValueError, OSError, json.JSONDecodeError, TypeError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise TraceError(f"{path}: unreadable trace file ({msg}); {fix}") from None
+    if not isinstance(meta, dict):
+        raise TraceError(f"{path}: trace metadata is not a JSON object; {fix}")
+    return FragmentTrace(**arrays, width=width, height=height, meta=meta, source=str(path))
