@@ -1,0 +1,41 @@
+"""The ``gpusim`` command line. Each command lives in its own module."""
+
+from __future__ import annotations
+
+import sys
+
+from gpusim import __version__
+from gpusim.cli import info_cmd, show_cmd, trace_cmd
+from gpusim.cli.common import Parser
+from gpusim.errors import GpusimError
+
+COMMANDS = (trace_cmd, info_cmd, show_cmd)
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="gpusim", description="Cycle-approximate simulator of multi-fragment rendering hardware.")
+    parser.add_argument("--version", action="version", version=f"gpusim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    for module in COMMANDS:
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "run", None):
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return args.run(args)
+    except GpusimError as exc:
+        print(f"gpusim: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("gpusim: interrupted; no output was left half-written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Images and figures. Everything that draws lives here; the core never imports it."""

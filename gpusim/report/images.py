@@ -1,0 +1,42 @@
+"""PNG output of images and per-pixel maps (matplotlib's object API; no global state)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from gpusim.atomic_io import atomic_output
+
+
+def save_image_png(image: np.ndarray, path: str | os.PathLike) -> None:
+    """Write an (H, W, 3) float image in [0, 1], row 0 = bottom, as an 8-bit PNG (atomically)."""
+    from matplotlib import image as mpimg
+
+    rgb = np.clip(np.asarray(image, dtype=np.float64)[::-1], 0.0, 1.0)
+    with atomic_output(path) as handle:
+        mpimg.imsave(handle, (rgb * 255.0 + 0.5).astype(np.uint8), format="png")
+
+
+def save_heatmap_png(values: np.ndarray, path: str | os.PathLike, title: str, label: str,
+                     log: bool = False) -> None:
+    """Write an (H, W) map (row 0 = bottom) as a colour-mapped figure with a colour bar."""
+    from matplotlib.colors import LogNorm
+
+    values = np.asarray(values)
+    height, width = values.shape
+    fig = Figure(figsize=(6.4, 6.4 * height / width + 0.6), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    norm = LogNorm(vmin=1, vmax=max(int(values.max()), 2)) if log and values.max() > 0 else None
+    shown = np.ma.masked_less_equal(values, 0) if log else values
+    im = ax.imshow(shown, origin="lower", cmap="inferno", norm=norm, interpolation="nearest")
+    ax.set_title(title)
+    ax.set_xlabel("x (pixel)")
+    ax.set_ylabel("y (pixel)")
+    fig.colorbar(im, ax=ax, label=label)
+    fig.tight_layout()
+    with atomic_output(path) as handle:
+        fig.savefig(handle, format="png")
