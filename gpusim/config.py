@@ -78,10 +78,10 @@ def _convert(value: Any, hint: Any, key: str, ctx: _Ctx) -> Any:
         if not isinstance(value, (list, tuple)):
             ctx.fail(key, f"expected a list, got {_fmt(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(v, args[0], f"{key}[{i}]", ctx) for i, v in enumerate(value))
+            return tuple(_convert(v, args[0], f"{key}.{i}", ctx) for i, v in enumerate(value))
         if len(value) != len(args):
             ctx.fail(key, f"expected a list of {len(args)} values, got {len(value)}")
-        return tuple(_convert(v, a, f"{key}[{i}]", ctx) for i, (v, a) in enumerate(zip(value, args)))
+        return tuple(_convert(v, a, f"{key}.{i}", ctx) for i, (v, a) in enumerate(zip(value, args)))
     if dataclasses.is_dataclass(hint):
         return build(hint, value, ctx.where, key)
     raise TypeError(f"unsupported config type {hint!r} for {key}")  # programming error

@@ -15,4 +15,13 @@ class ConfigError(GpusimError):
 
 
 class TraceError(GpusimError):
-    """A fragment trace is malformed, truncated or out of range."""
+    """A fragment trace is malformed, truncated or out of range.
+
+    ``fragment`` is the index of the offending fragment when there is one, and
+    ``problem`` the message without the file name (so importers can name a line).
+    """
+
+    def __init__(self, message: str, fragment: int | None = None, problem: str | None = None):
+        super().__init__(message)
+        self.fragment = fragment
+        self.problem = problem or message

@@ -66,8 +66,9 @@ class FragmentTrace:
         self.validate()
 
     # ------------------------------------------------------------------ checks
-    def _fail(self, what: str, fix: str = "") -> None:
-        raise TraceError(f"{self.source}: {what}" + (f"; {fix}" if fix else ""))
+    def _fail(self, what: str, fix: str = "", fragment: int | None = None) -> None:
+        problem = what + (f"; {fix}" if fix else "")
+        raise TraceError(f"{self.source}: {problem}", fragment=fragment, problem=problem)
 
     def validate(self) -> None:
         """Check shapes, dtypes and value ranges; raise TraceError on the first problem."""
@@ -105,22 +106,22 @@ class FragmentTrace:
             bad = int(np.flatnonzero(arr >= limit)[0])
             self._fail(f"fragment {bad} has {name}={int(arr[bad])}, outside the screen "
                        f"({what} must be < {limit})",
-                       f"fix the fragment or give a larger screen size")
+                       "fix the fragment or give a larger screen size", bad)
 
     def _check_unit_interval(self, arr: np.ndarray, what: str) -> None:
         lo, hi = float(arr.min()), float(arr.max())  # min/max propagate NaN
         if np.isnan(lo) or np.isnan(hi):
             bad = int(np.flatnonzero(np.isnan(arr).reshape(len(arr), -1).any(axis=1))[0])
-            self._fail(f"fragment {bad} has NaN {what}", "every value must be a number in [0, 1]")
+            self._fail(f"fragment {bad} has NaN {what}", "every value must be a number in [0, 1]", bad)
         if np.isinf(lo) or np.isinf(hi):
             bad = int(np.flatnonzero(np.isinf(arr).reshape(len(arr), -1).any(axis=1))[0])
-            self._fail(f"fragment {bad} has infinite {what}", "every value must be in [0, 1]")
+            self._fail(f"fragment {bad} has infinite {what}", "every value must be in [0, 1]", bad)
         if lo < 0.0 or hi > 1.0:
             outside = (arr < 0) | (arr > 1)
             bad = int(np.flatnonzero(outside.reshape(len(arr), -1).any(axis=1))[0])
-            value = arr[bad]
-            self._fail(f"fragment {bad} has {what} {np.round(value, 6).tolist()} outside [0, 1]",
-                       "clamp or rescale the values into [0, 1]")
+            value = np.round(arr[bad], 6).tolist()
+            self._fail(f"fragment {bad} has {what} {value} outside [0, 1]",
+                       "clamp or rescale the values into [0, 1]", bad)
 
     # ------------------------------------------------------------------ views
     def __len__(self) -> int:

@@ -15,6 +15,7 @@ memory stays near the size of the finished trace.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,7 @@ def _count_rows(path: Path) -> int:
 
 def _numeric(chunk: pd.DataFrame, column: str, path: Path, first_row: int) -> np.ndarray:
     series = chunk[column]
-    if series.dtype == object or series.dtype == bool and column != "opaque":
+    if not pd.api.types.is_numeric_dtype(series) or pd.api.types.is_bool_dtype(series):
         coerced = pd.to_numeric(series, errors="coerce")
         bad = np.flatnonzero(coerced.isna().to_numpy())
         if bad.size:
@@ -82,6 +83,35 @@ def _opaque(chunk: pd.DataFrame, path: Path, first_row: int) -> np.ndarray:
     return mapped.to_numpy(dtype=bool)
 
 
+def _fill(path: Path, columns: list[str], n: int, width: int, height: int, out: dict) -> int:
+    """Read the CSV chunk by chunk into the preallocated ``out`` arrays; returns the row count."""
+    pos = 0
+    try:
+        reader = pd.read_csv(path, chunksize=CHUNK_ROWS, skipinitialspace=True, index_col=False,
+                             skip_blank_lines=False, names=columns, header=0)
+        for chunk in reader:
+            rows = len(chunk)
+            if pos + rows > n:
+                raise TraceError(f"{path}: the file changed while it was read; try again")
+            sl = slice(pos, pos + rows)
+            out["x"][sl] = _integers(_numeric(chunk, "x", path, pos), "x", width, path, pos)
+            out["y"][sl] = _integers(_numeric(chunk, "y", path, pos), "y", height, path, pos)
+            out["z"][sl] = _numeric(chunk, "z", path, pos)
+            for i, c in enumerate("rgba"):
+                out["rgba"][sl, i] = _numeric(chunk, c, path, pos)
+            if "prim" in columns:
+                prim = _numeric(chunk, "prim", path, pos)
+                out["prim"][sl] = _integers(prim, "prim", 2**32, path, pos)
+            else:
+                out["prim"][sl] = np.arange(pos, pos + rows, dtype=np.uint32)
+            out["opaque"][sl] = _opaque(chunk, path, pos) if "opaque" in columns else False
+            pos += rows
+    except (pd.errors.ParserError, pd.errors.ParserWarning) as exc:
+        raise TraceError(f"{path}: malformed CSV ({str(exc).strip().splitlines()[0]}); every row needs "
+                         f"exactly {len(columns)} fields") from None
+    return pos
+
+
 def read_csv_trace(path: str | os.PathLike, width: int, height: int,
                    meta: dict | None = None) -> FragmentTrace:
     """Read a CSV fragment list (format in the module docstring) into a FragmentTrace."""
@@ -107,30 +137,15 @@ def read_csv_trace(path: str | os.PathLike, width: int, height: int,
     n = _count_rows(path)
     out = {name: np.empty((n, 4) if name == "rgba" else n, dtype=dt) for name, dt in DTYPES.items()}
     pos = 0
-    try:
-        reader = pd.read_csv(path, chunksize=CHUNK_ROWS, skipinitialspace=True,
-                             skip_blank_lines=True, names=columns, header=0)
-        for chunk in reader:
-            rows = len(chunk)
-            if pos + rows > n:
-                raise TraceError(f"{path}: the file changed while it was read; try again")
-            sl = slice(pos, pos + rows)
-            out["x"][sl] = _integers(_numeric(chunk, "x", path, pos), "x", width, path, pos)
-            out["y"][sl] = _integers(_numeric(chunk, "y", path, pos), "y", height, path, pos)
-            out["z"][sl] = _numeric(chunk, "z", path, pos)
-            for i, c in enumerate("rgba"):
-                out["rgba"][sl, i] = _numeric(chunk, c, path, pos)
-            if "prim" in columns:
-                prim = _numeric(chunk, "prim", path, pos)
-                out["prim"][sl] = _integers(prim, "prim", 2**32, path, pos)
-            else:
-                out["prim"][sl] = np.arange(pos, pos + rows, dtype=np.uint32)
-            out["opaque"][sl] = _opaque(chunk, path, pos) if "opaque" in columns else False
-            pos += rows
-    except pd.errors.ParserError as exc:
-        raise TraceError(f"{path}: malformed CSV ({str(exc).strip()}); every row needs "
-                         f"{len(columns)} fields") from None
-    if pos != n:  # blank lines were skipped: trim the arrays (views, no copy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pd.errors.ParserWarning)  # extra fields: an error, not a warning
+        pos = _fill(path, columns, n, width, height, out)
+    if pos != n:
         out = {k: v[:pos] for k, v in out.items()}
     meta = {"generator": "gpusim trace --from-csv", "source_csv": path.name, **(meta or {})}
-    return FragmentTrace(**out, width=width, height=height, meta=meta, source=str(path))
+    try:
+        return FragmentTrace(**out, width=width, height=height, meta=meta, source=str(path))
+    except TraceError as exc:  # name the CSV line, not only the fragment index
+        if exc.fragment is None:
+            raise
+        raise TraceError(f"{path}:{exc.fragment + 2}: {exc.problem}") from None

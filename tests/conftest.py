@@ -1,0 +1,31 @@
+"""Shared fixtures: small traces built in memory."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from gpusim.trace import FragmentTrace  # noqa: E402
+
+
+def make_trace(xs, ys, zs, rgba=None, opaque=None, width=8, height=8, prim=None, meta=None):
+    n = len(xs)
+    rgba = np.full((n, 4), 0.5, np.float32) if rgba is None else np.asarray(rgba, np.float32)
+    return FragmentTrace(np.asarray(xs, np.uint16), np.asarray(ys, np.uint16), np.asarray(zs, np.float32),
+                         rgba, np.arange(n, dtype=np.uint32) if prim is None else np.asarray(prim, np.uint32),
+                         np.zeros(n, bool) if opaque is None else np.asarray(opaque, bool),
+                         width, height, meta or {})
+
+
+@pytest.fixture
+def random_trace():
+    rng = np.random.default_rng(42)
+    n = 5000
+    return make_trace(rng.integers(0, 16, n), rng.integers(0, 12, n), rng.random(n),
+                      rng.random((n, 4)), rng.random(n) < 0.1, width=16, height=12,
+                      meta={"background": [0.2, 0.3, 0.4]})
