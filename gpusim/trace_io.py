@@ -44,6 +44,9 @@ def load_trace(path: str | os.PathLike) -> FragmentTrace:
     fix = "re-create it with 'gpusim trace'"
     if not path.is_file():
         raise TraceError(f"{path}: no such trace file; check the path or create one with 'gpusim trace'")
+    with open(path, "rb") as handle:
+        if handle.read(4) != b"PK\x03\x04":
+            raise TraceError(f"{path}: not a gpusim trace (.npz) file; give a trace written by 'gpusim trace'")
     try:
         with np.load(path, allow_pickle=False) as npz:
             members = set(npz.files)

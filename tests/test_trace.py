@@ -103,7 +103,7 @@ def test_newer_format_version_asks_for_upgrade(tmp_path, random_trace):
 def test_not_a_zip_and_missing_file(tmp_path):
     junk = tmp_path / "junk.npz"
     junk.write_text("hello")
-    with pytest.raises(TraceError):
+    with pytest.raises(TraceError, match="not a gpusim trace"):
         load_trace(junk)
     with pytest.raises(TraceError, match="no such trace file"):
         load_trace(tmp_path / "absent.npz")

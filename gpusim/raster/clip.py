@@ -28,6 +28,9 @@ _CLIP_PLANES = np.array([
     [0, 1, 0, GUARD_BAND], [0, -1, 0, GUARD_BAND],
 ], dtype=np.float64)
 _SCREEN_PLANES = np.array([[1, 0, 0, 1], [-1, 0, 0, 1], [0, 1, 0, 1], [0, -1, 0, 1]], dtype=np.float64)
+_ALL_PLANES = np.concatenate([_CLIP_PLANES, _SCREEN_PLANES])
+_CLIP = np.arange(len(_CLIP_PLANES))                    # planes that force clipping
+_REJECT = np.array([0, 1, *range(len(_CLIP_PLANES), len(_ALL_PLANES))])  # near, far, screen
 
 
 def _clip_polygon(verts: np.ndarray, attrs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -56,11 +59,14 @@ def clip_triangles(batch: TriangleBatch) -> TriangleBatch:
     """Drop invisible triangles and clip crossing ones; submission order is kept."""
     if len(batch) == 0:
         return batch
-    screen_d = batch.clip @ np.concatenate([_SCREEN_PLANES, _CLIP_PLANES[:2]]).T  # (T,3,P)
-    visible = ~(screen_d < 0).all(axis=1).any(axis=1)
-    clip_d = batch.clip @ _CLIP_PLANES.T
-    crossing = visible & (clip_d < 0).any(axis=(1, 2))
+    t = len(batch)
+    # one 2-D product for all vertices and planes (batched 3x4 products are slow in numpy)
+    outside = (batch.clip.reshape(-1, 4) @ _ALL_PLANES.T < 0).reshape(t, 3, -1)
+    visible = ~(outside[:, 0] & outside[:, 1] & outside[:, 2])[:, _REJECT].any(axis=1)
+    crossing = visible & (outside[:, 0] | outside[:, 1] | outside[:, 2])[:, _CLIP].any(axis=1)
     if not crossing.any():
+        if visible.all():
+            return batch
         return TriangleBatch(batch.clip[visible], batch.rgba[visible], batch.opaque[visible],
                              batch.prim[visible])
     keep_idx = np.flatnonzero(visible)

@@ -52,36 +52,35 @@ class _Setup:
 
     def __init__(self, batch: TriangleBatch, width: int, height: int, cull: str):
         clip = batch.clip
-        w = clip[..., 3]
-        win_x = (clip[..., 0] / w + 1.0) * (width / 2.0)
-        win_y = (clip[..., 1] / w + 1.0) * (height / 2.0)
-        win_z = (clip[..., 2] / w + 1.0) * 0.5
-        fx = np.rint(win_x * _ONE).astype(np.int64)
-        fy = np.rint(win_y * _ONE).astype(np.int64)
-        area2 = (fx[:, 1] - fx[:, 0]) * (fy[:, 2] - fy[:, 0]) - (fx[:, 2] - fx[:, 0]) * (fy[:, 1] - fy[:, 0])
+        inv_w = 1.0 / clip[..., 3]
+        fx = np.rint((clip[..., 0] * inv_w + 1.0) * (width / 2.0 * _ONE)).astype(np.int64)
+        fy = np.rint((clip[..., 1] * inv_w + 1.0) * (height / 2.0 * _ONE)).astype(np.int64)
+        x0, x1, x2 = fx[:, 0], fx[:, 1], fx[:, 2]
+        y0, y1, y2 = fy[:, 0], fy[:, 1], fy[:, 2]
+        area2 = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
         keep = area2 != 0
         if cull == "back":
             keep &= area2 > 0
         elif cull == "front":
             keep &= area2 < 0
-        # make every kept triangle counter-clockwise by swapping vertices 1 and 2
-        flip = area2 < 0
-        perm = np.where(flip[:, None], [0, 2, 1], [0, 1, 2])
-        rows = np.arange(len(perm))[:, None]
-        fx, fy, win_z, w = fx[rows, perm], fy[rows, perm], win_z[rows, perm], w[rows, perm]
-        rgba = batch.rgba[rows, perm]
-        area2 = np.abs(area2)
         # pixel bounding box of the covered samples, clamped to the screen
-        x0 = np.maximum((fx.min(axis=1) - _HALF + _ONE - 1) // _ONE, 0)
-        x1 = np.minimum((fx.max(axis=1) - _HALF) // _ONE, width - 1)
-        y0 = np.maximum((fy.min(axis=1) - _HALF + _ONE - 1) // _ONE, 0)
-        y1 = np.minimum((fy.max(axis=1) - _HALF) // _ONE, height - 1)
-        keep &= (x0 <= x1) & (y0 <= y1)
+        bx0 = np.maximum((np.minimum(np.minimum(x0, x1), x2) - _HALF + _ONE - 1) // _ONE, 0)
+        bx1 = np.minimum((np.maximum(np.maximum(x0, x1), x2) - _HALF) // _ONE, width - 1)
+        by0 = np.maximum((np.minimum(np.minimum(y0, y1), y2) - _HALF + _ONE - 1) // _ONE, 0)
+        by1 = np.minimum((np.maximum(np.maximum(y0, y1), y2) - _HALF) // _ONE, height - 1)
+        keep &= (bx0 <= bx1) & (by0 <= by1)
         sel = np.flatnonzero(keep)
         self.count = len(sel)
         self.prim, self.opaque = batch.prim[sel], batch.opaque[sel]
-        self.x0, self.x1, self.y0, self.y1 = x0[sel], x1[sel], y0[sel], y1[sel]
-        fx, fy = fx[sel], fy[sel]
+        self.x0, self.x1, self.y0, self.y1 = bx0[sel], bx1[sel], by0[sel], by1[sel]
+        fx, fy, inv_w = fx[sel], fy[sel], inv_w[sel]
+        z = (clip[sel, :, 2] * inv_w + 1.0) * 0.5
+        rgba = batch.rgba[sel]
+        # make every kept triangle counter-clockwise by swapping vertices 1 and 2
+        flip = np.flatnonzero(area2[sel] < 0)
+        for arr in (fx, fy, z, inv_w, rgba):
+            arr[flip, 1], arr[flip, 2] = arr[flip, 2], arr[flip, 1].copy()
+        area2 = np.abs(area2[sel])
         # edge k runs from vertex (k+1)%3 to (k+2)%3 and is opposite vertex k
         i, j = np.array([1, 2, 0]), np.array([2, 0, 1])
         self.ea = fy[:, i] - fy[:, j]                     # A_k = -(Yj - Yi)
@@ -89,14 +88,13 @@ class _Setup:
         top_left = (self.ea > 0) | ((self.ea == 0) & (self.eb > 0))
         self.ebias = np.where(top_left, 0, -1)
         self.ex, self.ey = fx[:, i], fy[:, i]
-        self.planes = self._attribute_planes(fx, fy, area2[sel], win_z[sel], w[sel], rgba[sel])
+        self.planes = self._attribute_planes(fx, fy, area2, z, inv_w, rgba)
 
     @staticmethod
-    def _attribute_planes(fx, fy, area2, z, w, rgba) -> np.ndarray:
-        """(T, 6, 3) planes a0 + dadx*(x-x0) + dady*(y-y0) in pixel units for
-        z, 1/w and rgba/w; plus (T, 2) vertex-0 positions stored in planes' context."""
+    def _attribute_planes(fx, fy, area2, z, inv_w, rgba) -> tuple[np.ndarray, np.ndarray]:
+        """Planes a0 + dadx*(x-x0) + dady*(y-y0) (pixel units) for z, 1/w and rgba/w, (T, 6, 3),
+        and each triangle's vertex-0 position (x0, y0), (T, 2)."""
         px, py = fx / _ONE, fy / _ONE
-        inv_w = 1.0 / w
         attrs = np.concatenate([z[..., None], inv_w[..., None], rgba * inv_w[..., None]], axis=2)  # (T,3,6)
         d1, d2 = attrs[:, 1] - attrs[:, 0], attrs[:, 2] - attrs[:, 0]
         x10, x20 = (px[:, 1] - px[:, 0])[:, None], (px[:, 2] - px[:, 0])[:, None]

@@ -1,0 +1,93 @@
+"""The command line as a user meets it: outputs, exit codes, one-line errors, no partial files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gpusim.cli import main
+from gpusim.trace_io import load_trace
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_trace_info_show_pipeline(tmp_path, capsys):
+    out = tmp_path / "d.npz"
+    code, text, _ = run(capsys, "trace", "default", "-o", str(out), "--size", "96x64", "--no-progress")
+    assert code == 0 and "fragments" in text
+    t = load_trace(out)
+    assert (t.width, t.height) == (96, 64) and t.meta["scene"] == "default"
+    code, text, _ = run(capsys, "info", str(out), "--json")
+    info = json.loads(text)
+    assert code == 0 and info["fragments"] == len(t)
+    assert info["depth_complexity"]["max"] == int(t.depth_complexity().max())
+    assert sum(info["depth_complexity"]["histogram"].values()) == info["covered_pixels"]
+    code, text, _ = run(capsys, "info", str(out))
+    assert code == 0 and "depth        max" in text
+    code, _, _ = run(capsys, "show", str(out), "-o", str(tmp_path / "png"))
+    assert code == 0
+    from matplotlib import image as mpimg
+    ref = mpimg.imread(tmp_path / "png" / "reference.png")
+    assert ref.shape[:2] == (64, 96)
+    assert (tmp_path / "png" / "depth_complexity.png").stat().st_size > 1000
+
+
+def test_csv_import_through_cli(tmp_path, capsys):
+    csv = tmp_path / "f.csv"
+    csv.write_text("x,y,z,r,g,b,a\n0,0,0.5,1,0,0,0.5\n1,1,0.2,0,1,0,1\n")
+    code, _, _ = run(capsys, "trace", "--from-csv", str(csv), "--size", "4x4", "-o", str(tmp_path / "c.npz"))
+    assert code == 0 and len(load_trace(tmp_path / "c.npz")) == 2
+
+
+@pytest.mark.parametrize("argv, expect", [
+    (["trace", "nope-scene", "-o", "{tmp}/o.npz"], "unknown scene 'nope-scene'"),
+    (["trace", "default", "-o", "{tmp}/o.png"], "must end in .npz"),
+    (["trace", "default", "--size", "12", "-o", "{tmp}/o.npz"], "expected WIDTHxHEIGHT"),
+    (["trace", "default", "--size", "0x5", "-o", "{tmp}/o.npz"], "each side must lie in"),
+    (["trace", "default", "--set", "camera.zoom=3", "-o", "{tmp}/o.npz"], "camera.zoom: unknown key"),
+    (["trace", "default", "--alpha", "0.5", "-o", "{tmp}/o.npz"], "--alpha applies to mesh files only"),
+    (["trace", "--from-csv", "{tmp}/bad.csv", "-o", "{tmp}/o.npz"], "needs the screen size"),
+    (["trace", "--from-csv", "{tmp}/bad.csv", "--size", "4x4", "-o", "{tmp}/o.npz"], "bad.csv:2: column 'z' is empty or NaN"),
+    (["info", "{tmp}/missing.npz"], "no such trace file"),
+    (["show", "{tmp}/bad.csv", "-o", "{tmp}/png"], "not a gpusim trace (.npz) file"),
+])
+def test_bad_input_is_one_line_nonzero_and_leaves_no_output(tmp_path, capsys, argv, expect):
+    (tmp_path / "bad.csv").write_text("x,y,z,r,g,b,a\n0,0,,1,1,1,1\n")
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and expect in err
+    assert err.count("\n") == 1 and err.startswith("gpusim: error:")
+    assert not (tmp_path / "o.npz").exists() and not (tmp_path / "png").exists()
+
+
+def test_usage_errors_are_one_line():
+    proc = subprocess.run([sys.executable, "-m", "gpusim", "trace"], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().count("\n") == 0 and "required: -o/--output" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_console_script_runs_and_nan_depth_csv_is_rejected(tmp_path):
+    csv = tmp_path / "n.csv"
+    csv.write_text("x,y,z,r,g,b,a\n0,0,0.5,1,0,0,0.5\n0,0,nan,1,0,0,0.5\n")
+    proc = subprocess.run([sys.executable, "-m", "gpusim", "trace", "--from-csv", str(csv), "--size", "2x2",
+                           "-o", str(tmp_path / "n.npz")], capture_output=True, text=True)
+    assert proc.returncode == 2 and "n.csv:3: column 'z' is empty or NaN" in proc.stderr
+    assert "Traceback" not in proc.stderr and not (tmp_path / "n.npz").exists()
+
+
+def test_existing_output_survives_a_failed_run(tmp_path, capsys):
+    out = tmp_path / "keep.npz"
+    run(capsys, "trace", "coplanar", "-o", str(out), "--no-progress")
+    before = out.read_bytes()
+    code, _, _ = run(capsys, "trace", "coplanar", "--set", "objects.0.alpha=7", "-o", str(out))
+    assert code == 2 and out.read_bytes() == before
+    np.testing.assert_array_equal(load_trace(out).x, load_trace(out).x)
