@@ -38,7 +38,7 @@ import numpy as np
 
 from gpusim.raster.batch import TriangleBatch
 from gpusim.raster.clip import clip_triangles
-from gpusim.trace import MAX_SCREEN_SIDE, FragmentTrace
+from gpusim.trace import DTYPES, MAX_SCREEN_SIDE, FragmentTrace
 
 SUBPIXEL_BITS = 8
 _ONE = 1 << SUBPIXEL_BITS        # one pixel in fixed point
@@ -165,10 +165,8 @@ def rasterize(batch: TriangleBatch, width: int, height: int,
     setup = _Setup(clip_triangles(batch), width, height, cull)
     tri, py, lo, length = _row_spans(setup)
     total = int(length.sum())
-    trace = FragmentTrace.empty(width, height, meta)
-    out = {"x": np.empty(total, np.uint16), "y": np.empty(total, np.uint16),
-           "z": np.empty(total, np.float32), "rgba": np.empty((total, 4), np.float32),
-           "prim": np.empty(total, np.uint32), "opaque": np.empty(total, bool)}
+    out = {name: np.empty((total, 4) if name == "rgba" else total, dtype)
+           for name, dtype in DTYPES.items()}
     planes, origin = setup.planes
     ends = np.cumsum(length)
     bounds = [0]
@@ -202,4 +200,4 @@ def rasterize(batch: TriangleBatch, width: int, height: int,
         pos += n
         bar.update(n)
     bar.close()
-    return FragmentTrace(**out, width=width, height=height, meta=trace.meta)
+    return FragmentTrace(**out, width=width, height=height, meta=dict(meta or {}))
