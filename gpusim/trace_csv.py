@@ -136,11 +136,10 @@ def read_csv_trace(path: str | os.PathLike, width: int, height: int,
 
     n = _count_rows(path)
     out = {name: np.empty((n, 4) if name == "rgba" else n, dtype=dt) for name, dt in DTYPES.items()}
-    pos = 0
     with warnings.catch_warnings():
         warnings.simplefilter("error", pd.errors.ParserWarning)  # extra fields: an error, not a warning
         pos = _fill(path, columns, n, width, height, out)
-    if pos != n:
+    if pos != n:  # fewer rows than lines (a quoted field held a newline): trim the views
         out = {k: v[:pos] for k, v in out.items()}
     meta = {"generator": "gpusim trace --from-csv", "source_csv": path.name, **(meta or {})}
     try:

@@ -21,9 +21,13 @@ import numpy as np
 from gpusim.trace import FragmentTrace
 
 
-def depth_order(trace: FragmentTrace) -> np.ndarray:
-    """Fragment indices sorted by (pixel, depth, submission order)."""
-    return np.lexsort((trace.z, trace.pixel_ids()))   # lexsort is stable: ties keep submission order
+def depth_order(trace: FragmentTrace, pixel_ids: np.ndarray | None = None) -> np.ndarray:
+    """Fragment indices sorted by (pixel, depth, submission order).
+
+    ``pixel_ids`` may pass ``trace.pixel_ids()`` when the caller already has it.
+    """
+    pix = trace.pixel_ids() if pixel_ids is None else pixel_ids
+    return np.lexsort((trace.z, pix))   # lexsort is stable: ties keep submission order
 
 
 def composite_exact(trace: FragmentTrace, background=None) -> np.ndarray:
@@ -33,12 +37,15 @@ def composite_exact(trace: FragmentTrace, background=None) -> np.ndarray:
     image[:] = bg
     if len(trace) == 0:
         return image.reshape(trace.height, trace.width, 3)
-    order = depth_order(trace)
-    pix = trace.pixel_ids()[order]
+    pix = trace.pixel_ids()
+    order = depth_order(trace, pix)
+    pix = pix[order]
     alpha = np.where(trace.opaque[order], 1.0, trace.rgba[order, 3].astype(np.float64))
     weighted = trace.rgba[order, :3].astype(np.float64) * alpha[:, None]
     # per covered pixel: first sorted index and count; visit pixels by decreasing count
-    covered, start, count = np.unique(pix, return_index=True, return_counts=True)
+    start = np.flatnonzero(np.r_[True, pix[1:] != pix[:-1]])   # pix is sorted: runs are pixels
+    covered = pix[start]
+    count = np.diff(np.r_[start, len(pix)])
     by_count = np.argsort(-count, kind="stable")
     covered, start, count = covered[by_count], start[by_count], count[by_count]
     # active[k] = number of pixels with more than k fragments (a prefix, counts descending)
