@@ -9,15 +9,16 @@ are composited front to back in float64 over the background:
 
 An opaque fragment has a = 1 whatever its stored alpha, so everything behind
 it contributes nothing. Colours are straight (not premultiplied). The loop runs
-over *depth rank* (vectorised over all pixels with at least that many
-fragments), so a pixel with thousands of layers costs thousands of small steps
-and never a Python loop over fragments; transmittance underflows cleanly to 0.
+over *depth rank* (:func:`gpusim.metrics.composite.composite_runs`), so a
+pixel with thousands of layers costs thousands of small vector steps and never
+a Python loop over fragments; transmittance underflows cleanly to 0.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from gpusim.metrics.composite import composite_runs
 from gpusim.trace import FragmentTrace
 
 
@@ -33,28 +34,8 @@ def depth_order(trace: FragmentTrace, pixel_ids: np.ndarray | None = None) -> np
 def composite_exact(trace: FragmentTrace, background=None) -> np.ndarray:
     """The exact reference image, (height, width, 3) float64, row 0 = bottom (window y = 0)."""
     bg = trace.background if background is None else np.asarray(background, dtype=np.float64)
-    image = np.empty((trace.pixel_count, 3))
-    image[:] = bg
-    if len(trace) == 0:
-        return image.reshape(trace.height, trace.width, 3)
     pix = trace.pixel_ids()
     order = depth_order(trace, pix)
-    pix = pix[order]
     alpha = np.where(trace.opaque[order], 1.0, trace.rgba[order, 3].astype(np.float64))
-    weighted = trace.rgba[order, :3].astype(np.float64) * alpha[:, None]
-    # per covered pixel: first sorted index and count; visit pixels by decreasing count
-    start = np.flatnonzero(np.r_[True, pix[1:] != pix[:-1]])   # pix is sorted: runs are pixels
-    covered = pix[start]
-    count = np.diff(np.r_[start, len(pix)])
-    by_count = np.argsort(-count, kind="stable")
-    covered, start, count = covered[by_count], start[by_count], count[by_count]
-    # active[k] = number of pixels with more than k fragments (a prefix, counts descending)
-    active = np.searchsorted(-count, -(np.arange(count[0]) + 1), side="right")
-    trans = np.ones(len(covered))
-    colour = np.zeros((len(covered), 3))
-    for k, m in enumerate(active):
-        idx = start[:m] + k
-        colour[:m] += trans[:m, None] * weighted[idx]
-        trans[:m] *= 1.0 - alpha[idx]
-    image[covered] = colour + trans[:, None] * bg
+    image = composite_runs(pix[order], trace.rgba[order, :3], alpha, trace.pixel_count, bg)
     return image.reshape(trace.height, trace.width, 3)

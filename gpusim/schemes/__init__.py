@@ -1,0 +1,13 @@
+"""Multi-fragment scheme models: what each scheme stores, reads, writes and updates.
+
+Importing this package registers every scheme; select one by its CLI name with
+:func:`make_scheme`. See gpusim.schemes.base for the interface and
+gpusim.schemes.opstream for the operations a scheme reports.
+"""
+
+from gpusim.schemes import freepipe_abuffer  # noqa: F401  (registers)
+from gpusim.schemes.base import REGISTRY, Scheme, describe_scheme, make_scheme, scheme_class, scheme_names
+from gpusim.schemes.result import SchemeResult
+
+__all__ = ["REGISTRY", "Scheme", "SchemeResult", "describe_scheme", "make_scheme", "scheme_class",
+           "scheme_names"]

@@ -1,0 +1,106 @@
+"""Per-pixel views of a trace that every scheme needs: arrival order and depth order.
+
+All arrays are computed once, vectorised, and only when first asked for.
+Fragments are numbered in submission order (the order the scheme sees them,
+after any reordering it applies).
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+
+from gpusim.metrics.composite import run_starts
+from gpusim.schemes.depthkey import depth_key
+from gpusim.schemes.storage import effective_alpha
+from gpusim.trace import FragmentTrace
+
+
+class PixelGroups:
+    """Arrival and depth order of the fragments of each pixel."""
+
+    def __init__(self, trace: FragmentTrace):
+        self.trace = trace
+        self.n = len(trace)
+        self.pixel_count = trace.pixel_count
+
+    @cached_property
+    def pix(self) -> np.ndarray:
+        """Pixel id of each fragment (int64)."""
+        return self.trace.pixel_ids()
+
+    @cached_property
+    def key(self) -> np.ndarray:
+        """Ordered uint32 depth key of each fragment (gpusim.schemes.depthkey)."""
+        return depth_key(self.trace.z)
+
+    @cached_property
+    def alpha(self) -> np.ndarray:
+        return effective_alpha(self.trace.rgba, self.trace.opaque)
+
+    @cached_property
+    def count(self) -> np.ndarray:
+        """Fragments per pixel, (pixel_count,) int64."""
+        return np.bincount(self.pix, minlength=self.pixel_count)
+
+    @cached_property
+    def covered(self) -> int:
+        return int(np.count_nonzero(self.count))
+
+    @cached_property
+    def by_arrival(self) -> np.ndarray:
+        """Fragment indices grouped by pixel (ascending), submission order inside a pixel."""
+        return np.argsort(self.pix, kind="stable")
+
+    @cached_property
+    def arrival(self) -> np.ndarray:
+        """0-based arrival rank of each fragment at its pixel (the j-1 of 'j-th fragment')."""
+        return self._rank_in_runs(self.by_arrival)
+
+    @cached_property
+    def by_depth(self) -> np.ndarray:
+        """Fragment indices grouped by pixel, nearest first, equal depths in submission order."""
+        combined = (self.pix.astype(np.uint64) << np.uint64(32)) | self.key.astype(np.uint64)
+        return np.argsort(combined, kind="stable")
+
+    @cached_property
+    def depth_rank(self) -> np.ndarray:
+        """0-based position of each fragment in its pixel's depth order."""
+        return self._rank_in_runs(self.by_depth)
+
+    @cached_property
+    def distinct_rank(self) -> np.ndarray:
+        """0-based rank of each fragment's depth among the distinct depths of its pixel."""
+        order = self.by_depth
+        pix, key = self.pix[order], self.key[order]
+        new_pixel = np.r_[True, pix[1:] != pix[:-1]]
+        new_value = new_pixel | np.r_[True, key[1:] != key[:-1]]
+        steps = np.cumsum(new_value) - 1                    # distinct values so far, global
+        start = np.flatnonzero(new_pixel)
+        first = np.repeat(steps[start], np.diff(np.r_[start, len(order)]))
+        rank = np.empty(self.n, np.int64)
+        rank[order] = steps - first
+        return rank
+
+    def _rank_in_runs(self, order: np.ndarray) -> np.ndarray:
+        pix = self.pix[order]
+        start = run_starts(pix)
+        lengths = np.diff(np.r_[start, len(order)])
+        rank = np.empty(self.n, np.int64)
+        rank[order] = np.arange(self.n) - np.repeat(start, lengths)
+        return rank
+
+
+def segment_running_min_before(pix_sorted: np.ndarray, key_sorted: np.ndarray) -> np.ndarray:
+    """For grouped runs: the minimum key among the *earlier* entries of the same run.
+
+    Returns uint64 with 2**32 where there is no earlier entry. Vectorised with
+    one accumulate: larger pixel ids reset the running maximum of the inverted key.
+    """
+    inv = (pix_sorted.astype(np.uint64) << np.uint64(32)) | (np.uint64(0xFFFFFFFF) - key_sorted.astype(np.uint64))
+    run_max = np.maximum.accumulate(inv)
+    prev = np.r_[np.uint64(0), run_max[:-1]]
+    same = np.r_[False, pix_sorted[1:] == pix_sorted[:-1]]
+    best = np.uint64(0xFFFFFFFF) - (prev & np.uint64(0xFFFFFFFF))
+    return np.where(same, best, np.uint64(1) << np.uint64(32))

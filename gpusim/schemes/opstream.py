@@ -1,0 +1,213 @@
+"""The OpStream: the memory operations a scheme issues, the seam to the timing model.
+
+A scheme describes its operations as an :class:`OpPlan`: a list of
+:class:`OpGroup` s, each "every thread in this set issues ``count`` operations
+``op`` on ``structure`` at these byte offsets", added in program order. The
+plan gives the access counts per structure and operation without expanding
+anything (so a functional run stays fast), and :meth:`OpPlan.expand` turns it
+into an :class:`OpStream`, one row per operation, only when a consumer (the
+timing model, a test) asks for it. Counts and stream come from the same groups,
+so they cannot disagree.
+
+Rows are ordered by pass, then thread, then program order inside the thread.
+A thread is a fragment (geometry passes, numbered in submission order after
+any reordering the scheme applies), a pixel (full-screen passes: the pixel id
+``y * width + x``) or a memory entry (clear passes). Addresses are bytes in
+one flat space; each structure starts at a 4 KiB-aligned base.
+
+Operations (``OPS``):
+
+=========== ====================================================================
+load        read of ``bytes`` bytes (texture fetch or global load)
+store       write of ``bytes`` bytes
+atomic_min  atomic minimum on a 32-bit word (returns the old value)
+atomic_max  atomic maximum on a 32-bit word
+atomic_inc  atomic increment of a 32-bit counter (returns the old value)
+atomic_exch atomic exchange of a 32-bit word (returns the old value)
+rmw_read    the read half of an unsynchronised read-modify-write (k-buffer
+            through textures: hazards arise between it and the rmw_write)
+rmw_write   the write half of an unsynchronised read-modify-write
+blend       a fixed-function ROP read-modify-write of a framebuffer value,
+            committed in submission order by the ROP (never a hazard)
+depth_test  a ROP depth test: read, compare and conditional write of a depth
+stencil     a ROP stencil test and update of one sample's stencil value
+=========== ====================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from gpusim.errors import GpusimError
+
+OPS = ("load", "store", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
+       "rmw_read", "rmw_write", "blend", "depth_test", "stencil")
+PASS_KINDS = ("clear", "geometry", "fullscreen", "flush")
+THREAD_KINDS = ("fragment", "pixel", "entry", "none")
+BASE_ALIGN = 4096          # bytes
+DEFAULT_MAX_OPS = 200_000_000
+
+
+@dataclass(frozen=True)
+class Pass:
+    """One pass of a scheme: ``kind`` in PASS_KINDS, ``threads`` in THREAD_KINDS."""
+
+    name: str
+    kind: str
+    threads: str
+
+    def __post_init__(self):
+        if self.kind not in PASS_KINDS or self.threads not in THREAD_KINDS:
+            raise ValueError(f"bad pass {self}")
+
+
+@dataclass
+class OpGroup:
+    """``count[i]`` operations of one kind by thread ``thread[i]``; offsets from ``offset(i, seq)``."""
+
+    pass_index: int
+    op: str
+    structure: str
+    thread: np.ndarray
+    count: np.ndarray
+    offset: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    bytes: int
+    dep: bool
+
+    @property
+    def total(self) -> int:
+        return int(self.count.sum())
+
+
+@dataclass
+class OpPlan:
+    """The operations of one scheme run, grouped (see the module docstring)."""
+
+    passes: list[Pass]
+    structures: list[str]
+    groups: list[OpGroup] = field(default_factory=list)
+
+    def add(self, pass_index: int, op: str, structure: str, thread: np.ndarray, count,
+            offset: Callable[[np.ndarray, np.ndarray], np.ndarray], nbytes: int,
+            dep: bool = False) -> None:
+        """Append a group in program order (after the groups already added for these threads)."""
+        if op not in OPS:
+            raise ValueError(f"unknown operation {op!r}")
+        if structure not in self.structures:
+            raise ValueError(f"operation on unallocated structure {structure!r}")
+        if not 0 <= pass_index < len(self.passes):
+            raise ValueError(f"pass {pass_index} out of range")
+        thread = np.asarray(thread, dtype=np.int64)
+        count = np.broadcast_to(np.asarray(count, dtype=np.int64), thread.shape)
+        if len(thread) and int(count.sum()) > 0:
+            self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep))
+
+    def total_ops(self) -> int:
+        return sum(g.total for g in self.groups)
+
+    def accesses(self) -> dict[str, dict[str, int]]:
+        """Operation counts per structure and operation (no expansion)."""
+        out: dict[str, dict[str, int]] = {}
+        for g in self.groups:
+            ops = out.setdefault(g.structure, {})
+            ops[g.op] = ops.get(g.op, 0) + g.total
+        return out
+
+    def accesses_by_pass(self) -> list[dict]:
+        """Tidy rows: pass, structure, operation, count, bytes."""
+        rows: dict[tuple, list[int]] = {}
+        for g in self.groups:
+            key = (self.passes[g.pass_index].name, g.structure, g.op)
+            acc = rows.setdefault(key, [0, 0])
+            acc[0] += g.total
+            acc[1] += g.total * g.bytes
+        return [{"pass": k[0], "structure": k[1], "op": k[2], "count": v[0], "bytes": v[1]}
+                for k, v in rows.items()]
+
+    def expand(self, bases: dict[str, int], max_ops: int = DEFAULT_MAX_OPS) -> "OpStream":
+        """One row per operation, ordered by (pass, thread, program order)."""
+        total = self.total_ops()
+        if total > max_ops:
+            raise GpusimError(f"the OpStream would hold {total:,} operations (~{total * 24 / 2**30:.1f} GiB), "
+                              f"over the limit of {max_ops:,}; use a smaller trace or a sampled fidelity")
+        cols: dict[str, list] = {k: [] for k in ("pass_index", "thread", "op", "structure", "address",
+                                                  "bytes", "dep")}
+        for g in self.groups:
+            n = g.total
+            i = np.repeat(np.arange(len(g.thread)), g.count)
+            first = np.cumsum(g.count) - g.count
+            seq = np.arange(n, dtype=np.int64) - np.repeat(first, g.count)
+            offset = np.asarray(g.offset(i, seq), dtype=np.uint64)
+            cols["pass_index"].append(np.full(n, g.pass_index, np.uint32))
+            cols["thread"].append(g.thread[i])
+            cols["op"].append(np.full(n, OPS.index(g.op), np.uint8))
+            cols["structure"].append(np.full(n, self.structures.index(g.structure), np.uint8))
+            cols["address"].append(offset + np.uint64(bases[g.structure]))
+            cols["bytes"].append(np.full(n, g.bytes, np.uint32))
+            cols["dep"].append(np.full(n, g.dep, bool))
+        arrays = {k: (np.concatenate(v) if v else np.zeros(0, dtype=_EMPTY_DTYPES[k]))
+                  for k, v in cols.items()}
+        order = np.lexsort((arrays["thread"], arrays["pass_index"]))   # stable: keeps program order
+        arrays = {k: v[order] for k, v in arrays.items()}
+        return OpStream(**arrays, passes=list(self.passes), structures=list(self.structures),
+                        bases=dict(bases))
+
+
+_EMPTY_DTYPES = {"pass_index": np.uint32, "thread": np.int64, "op": np.uint8, "structure": np.uint8,
+                 "address": np.uint64, "bytes": np.uint32, "dep": bool}
+
+
+@dataclass(eq=False)
+class OpStream:
+    """Columnar memory operations (see the module docstring).
+
+    ``op`` and ``structure`` are codes into ``OPS`` and ``structures``;
+    ``dep`` is True where the operation needs the result of the thread's previous
+    operation (an atomic chain, a store at an address an atomic returned).
+    """
+
+    pass_index: np.ndarray
+    thread: np.ndarray
+    op: np.ndarray
+    structure: np.ndarray
+    address: np.ndarray
+    bytes: np.ndarray
+    dep: np.ndarray
+    passes: list[Pass]
+    structures: list[str]
+    bases: dict[str, int]
+
+    def __len__(self) -> int:
+        return int(len(self.op))
+
+    def counts(self) -> dict[str, dict[str, int]]:
+        """Operation counts per structure and operation, counted from the rows."""
+        out: dict[str, dict[str, int]] = {}
+        if len(self) == 0:
+            return out
+        code = self.structure.astype(np.int64) * len(OPS) + self.op
+        for c, n in zip(*np.unique(code, return_counts=True)):
+            out.setdefault(self.structures[c // len(OPS)], {})[OPS[c % len(OPS)]] = int(n)
+        return out
+
+    def to_frame(self) -> pd.DataFrame:
+        """A pandas view with categorical pass, op and structure names."""
+        return pd.DataFrame({
+            "pass": pd.Categorical.from_codes(self.pass_index.astype(np.int64), [p.name for p in self.passes]),
+            "thread": self.thread,
+            "op": pd.Categorical.from_codes(self.op.astype(np.int64), list(OPS)),
+            "structure": pd.Categorical.from_codes(self.structure.astype(np.int64), self.structures),
+            "address": self.address, "bytes": self.bytes, "dep": self.dep})
+
+
+def layout_bases(structures: list[str], sizes: dict[str, int]) -> dict[str, int]:
+    """Base byte address of each structure, in order, each aligned to BASE_ALIGN."""
+    bases, at = {}, 0
+    for name in structures:
+        bases[name] = at
+        at += -(-max(int(sizes[name]), 1) // BASE_ALIGN) * BASE_ALIGN
+    return bases

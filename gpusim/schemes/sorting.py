@@ -1,0 +1,105 @@
+"""Per-pixel sorts of a resolve pass: insertion sort and bitonic sort, vectorised over pixels.
+
+Both produce ascending depth order; they differ in what they do with *equal*
+depths and in how many compare operations they cost:
+
+* insertion sort is stable: equal depths keep the order they were loaded in.
+  Compares for n keys = (n - 1) + inversions - (number of keys that move all
+  the way to the front), counted exactly.
+* bitonic sort is a fixed network on the next power of two m >= n (padding
+  with +infinity): (m / 2) * log2(m) * (log2(m) + 1) / 2 compare-exchanges per
+  pixel whatever the data. It is not stable; the order it gives equal depths is
+  computed by running the network itself, so ties land where a GPU would put them.
+
+Pixels are processed in classes of equal padded size m, each as one (pixels, m) array.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gpusim.metrics.composite import run_starts
+
+_PAD = np.uint64(1) << np.uint64(40)
+
+
+def _classes(pix: np.ndarray):
+    """Yield (m, run starts, run lengths) per power-of-two class of run length."""
+    start = run_starts(pix)
+    length = np.diff(np.r_[start, len(pix)])
+    m = np.ones_like(length)
+    big = length > 1
+    m[big] = 1 << np.ceil(np.log2(length[big])).astype(np.int64)
+    for size in np.unique(m):
+        sel = m == size
+        yield int(size), start[sel], length[sel]
+
+
+def _matrix(values: np.ndarray, start: np.ndarray, length: np.ndarray, m: int, pad):
+    cols = np.arange(m)
+    valid = cols[None, :] < length[:, None]
+    idx = np.where(valid, start[:, None] + cols[None, :], 0)
+    mat = np.where(valid, values[idx], pad)
+    return mat, valid, idx
+
+
+def sort_runs(pix: np.ndarray, key: np.ndarray, method: str) -> tuple[np.ndarray, int]:
+    """Permutation sorting each run of ``pix`` (grouped) by ``key``, and the compare count.
+
+    ``key`` is uint32 depth keys in load order. Returns (``perm``, ``compares``):
+    ``perm`` indexes the input so that ``key[perm]`` is ascending inside every run.
+    """
+    n = len(pix)
+    if method == "insertion":
+        perm = np.lexsort((np.arange(n), key, pix))
+        return perm, _insertion_compares(pix, key)
+    if method != "bitonic":
+        raise ValueError(f"unknown sort {method!r} (valid: insertion, bitonic)")
+    perm = np.arange(n)
+    compares = 0
+    for m, start, length in _classes(pix):
+        if m == 1:
+            continue
+        mat, valid, idx = _matrix(key.astype(np.uint64), start, length, m, _PAD)
+        pos = np.broadcast_to(np.arange(m), mat.shape).copy()
+        stages = 0
+        k = 2
+        while k <= m:
+            j = k // 2
+            while j >= 1:
+                i = np.arange(m)
+                lo = i[(i ^ j) > i]
+                hi = lo ^ j
+                asc = (lo & k) == 0
+                a, b = mat[:, lo], mat[:, hi]
+                swap = np.where(asc[None, :], a > b, a < b)
+                mat[:, lo], mat[:, hi] = np.where(swap, b, a), np.where(swap, a, b)
+                pa, pb = pos[:, lo], pos[:, hi]
+                pos[:, lo], pos[:, hi] = np.where(swap, pb, pa), np.where(swap, pa, pb)
+                stages += 1
+                j //= 2
+            k *= 2
+        compares += len(start) * (m // 2) * stages
+        # padding sorts last (its key is above every depth key): the first `length` are real
+        src = start[:, None] + pos
+        perm_rows = np.where(valid, src, -1)
+        dest = np.where(valid, idx, -1)
+        perm[dest[valid]] = perm_rows[valid]
+    return perm, compares
+
+
+def _insertion_compares(pix: np.ndarray, key: np.ndarray) -> int:
+    compares = 0
+    for m, start, length in _classes(pix):
+        if m == 1:
+            continue
+        mat, valid, _ = _matrix(key.astype(np.uint64), start, length, m, _PAD)
+        inversions = 0
+        for d in range(1, m):
+            both = valid[:, d:]      # valid[:, :-d] is implied where the later one is valid
+            inversions += int(np.count_nonzero((mat[:, :-d] > mat[:, d:]) & both))
+        # keys strictly below every earlier key walk to the front: their last compare is skipped
+        prior_min = np.minimum.accumulate(mat, axis=1)[:, :-1]
+        to_front = int(np.count_nonzero((mat[:, 1:] < prior_min) & valid[:, 1:]))
+        compares += int((length - 1).sum()) + inversions - to_front
+    return compares
