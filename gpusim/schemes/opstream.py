@@ -69,7 +69,7 @@ class Pass:
 class OpGroup:
     """``count[i]`` operations of one kind by thread ``thread[i]``; offsets from ``offset(i, seq)``."""
 
-    pass_index: int
+    pass_index: int | np.ndarray      # one pass, or the pass of each thread
     op: str
     structure: str
     thread: np.ndarray
@@ -91,7 +91,7 @@ class OpPlan:
     structures: list[str]
     groups: list[OpGroup] = field(default_factory=list)
 
-    def add(self, pass_index: int, op: str, structure: str, thread: np.ndarray, count,
+    def add(self, pass_index, op: str, structure: str, thread: np.ndarray, count,
             offset: Callable[[np.ndarray, np.ndarray], np.ndarray], nbytes: int,
             dep: bool = False) -> None:
         """Append a group in program order (after the groups already added for these threads)."""
@@ -99,10 +99,12 @@ class OpPlan:
             raise ValueError(f"unknown operation {op!r}")
         if structure not in self.structures:
             raise ValueError(f"operation on unallocated structure {structure!r}")
-        if not 0 <= pass_index < len(self.passes):
-            raise ValueError(f"pass {pass_index} out of range")
         thread = np.asarray(thread, dtype=np.int64)
         count = np.broadcast_to(np.asarray(count, dtype=np.int64), thread.shape)
+        if not np.isscalar(pass_index):
+            pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), thread.shape)
+        if len(thread) and not (0 <= np.min(pass_index) and np.max(pass_index) < len(self.passes)):
+            raise ValueError(f"pass index out of range 0..{len(self.passes) - 1}")
         if len(thread) and int(count.sum()) > 0:
             self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep))
 
@@ -121,10 +123,15 @@ class OpPlan:
         """Tidy rows: pass, structure, operation, count, bytes."""
         rows: dict[tuple, list[int]] = {}
         for g in self.groups:
-            key = (self.passes[g.pass_index].name, g.structure, g.op)
-            acc = rows.setdefault(key, [0, 0])
-            acc[0] += g.total
-            acc[1] += g.total * g.bytes
+            if np.isscalar(g.pass_index):
+                per_pass = {int(g.pass_index): g.total}
+            else:
+                sums = np.bincount(g.pass_index, weights=g.count, minlength=len(self.passes))
+                per_pass = {p: int(c) for p, c in enumerate(sums) if c}
+            for p, total in per_pass.items():
+                acc = rows.setdefault((self.passes[p].name, g.structure, g.op), [0, 0])
+                acc[0] += total
+                acc[1] += total * g.bytes
         return [{"pass": k[0], "structure": k[1], "op": k[2], "count": v[0], "bytes": v[1]}
                 for k, v in rows.items()]
 
@@ -142,7 +149,8 @@ class OpPlan:
             first = np.cumsum(g.count) - g.count
             seq = np.arange(n, dtype=np.int64) - np.repeat(first, g.count)
             offset = np.asarray(g.offset(i, seq), dtype=np.uint64)
-            cols["pass_index"].append(np.full(n, g.pass_index, np.uint32))
+            cols["pass_index"].append(np.full(n, g.pass_index, np.uint32) if np.isscalar(g.pass_index)
+                                      else g.pass_index[i].astype(np.uint32))
             cols["thread"].append(g.thread[i])
             cols["op"].append(np.full(n, OPS.index(g.op), np.uint8))
             cols["structure"].append(np.full(n, self.structures.index(g.structure), np.uint8))

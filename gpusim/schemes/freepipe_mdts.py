@@ -1,0 +1,213 @@
+"""FreePipe's multi-depth test scheme, MDTS (seed 000 section 4.1; seed 001 "CUDP1").
+
+A fixed array of ``layers`` 32-bit values per pixel, cleared to the maximum
+integer (``direction = min``; 0 for ``max``). Each fragment walks its pixel's
+array with ``atomicMin`` (Table 1 of seed 000): it stops at the first empty
+entry; otherwise it carries max(new, old) to the next entry, and whatever is
+carried past the last entry is discarded. Whatever the interleaving, each
+pixel ends with its ``layers`` smallest values in ascending order, and the j-th
+fragment to reach a pixel makes min(j, layers) atomic operations (every atomic
+depends on the value the previous one returned).
+
+Colour (the array holds depths only):
+
+* ``packing = false``: a second geometry pass captures colour, as the paper
+  suggests ("an additional pass ... performance will be halved"). Each fragment
+  loads the array until it finds its own depth and stores its colour in the
+  same entry of ``colour_array``. Fragments of *equal* depth find the same first
+  entry: the later one's colour wins and the other entry keeps the cleared
+  colour (transparent black), counted as ``colour_collisions``.
+* ``packing = true`` (section 4.1.2): one pass; depth is mapped to [0.5, 1), 20
+  bits kept, and the 24-bit RGB colour split into two 12-bit halves stored in
+  the free low bits of two copies (``depth_array`` and ``colour_array``), each
+  updated by its own atomic chain. The colour has no alpha: ``alpha`` (or the
+  trace's single alpha) is used for every fragment. Colour mismatches (halves
+  from different fragments) and order inversions are measured, not assumed.
+
+Passes: ``clear`` (one store per entry of each array), ``capture``, (``colour``),
+``resolve`` (one thread per pixel: loads entries until the first empty one).
+With ``direction = max`` the arrays hold the *farthest* ``layers`` values in
+descending order, and a value equal to 0 (the empty value) cannot be stored.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.errors import GpusimError
+from gpusim.schemes.arrays import Layout, count_before_in_pixel, entry_index, rank_in_runs, smallest_per_pixel
+from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.depthkey import EMPTY, colour24, colour24_rgb, packed_depth
+from gpusim.schemes.groups import PixelGroups
+from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
+
+
+@register("freepipe-mdts")
+@dataclass(frozen=True)
+class FreePipeMDTS(Scheme):
+    summary = "FreePipe multi-depth test: per-pixel arrays filled by atomicMin chains"
+
+    layers: int = param(20, unit="entries/pixel", doc="array entries per pixel (nearest fragments kept)", min=1)
+    direction: Literal["min", "max"] = param("min", doc="atomicMin (ascending) or atomicMax (descending)")
+    packing: bool = param(False, doc="pack depth + colour into two 32-bit copies (section 4.1.2), one pass")
+    alpha: float | None = param(None, unit="1", doc="constant alpha for packing (default: the trace's single alpha)",
+                                min=0.0, max=1.0)
+    colour_format: ColourFormat = param("rgba8", doc="colour_array format without packing")
+    layout: Layout = param("pixel-major", doc="entry layout: pixel-major ([x][y][i]) or layer-major")
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        P, L, n = trace.pixel_count, self.layers, len(trace)
+        pix, layout = g.pix, self.layout
+        atomic = "atomic_min" if self.direction == "min" else "atomic_max"
+        empty = EMPTY if self.direction == "min" else np.uint32(0)
+        if self.packing:
+            alpha = self._packing_alpha(trace, g)
+            hi_lo = colour24(trace.rgba[:, :3])
+            depth20 = packed_depth(trace.z)
+            values = {"depth_array": depth20 | (hi_lo >> np.uint32(12)),
+                      "colour_array": depth20 | (hi_lo & np.uint32(0xFFF))}
+        else:
+            values = {"depth_array": g.key}
+        cb = 4 if self.packing else COLOUR_BYTES[self.colour_format]
+
+        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment")]
+        if not self.packing:
+            passes.append(Pass("colour", "geometry", "fragment"))
+        passes.append(Pass("resolve", "fullscreen", "pixel"))
+        resolve_pass = len(passes) - 1
+        structures = ["depth_array", "colour_array"]
+        plan = OpPlan(passes, structures)
+        entries = np.arange(P * L)
+        plan.add(0, "store", "depth_array", entries, 1, lambda i, s: i * DEPTH_BYTES, DEPTH_BYTES)
+        plan.add(0, "store", "colour_array", entries, 1, lambda i, s: i * cb, cb)
+
+        kept: dict[str, np.ndarray] = {}
+        frags = np.arange(n)
+        for name, value in values.items():
+            storable = value != empty
+            sort_value = value if self.direction == "min" else np.uint32(0xFFFFFFFF) - value
+            kept[name] = smallest_per_pixel(pix, sort_value, L, np.flatnonzero(storable))
+            # a chain ends at the first empty entry: one atomic per entry filled before it + 1, at most L
+            filled_before = np.minimum(count_before_in_pixel(pix, g.by_arrival, storable), L)
+            chain = np.minimum(filled_before + 1, L)
+            size = DEPTH_BYTES if name == "depth_array" else cb
+            plan.add(1, atomic, name, frags, chain,
+                     lambda i, s: entry_index(pix[i], s, L, P, layout) * size, size, dep=True)
+
+        kd = kept["depth_array"]
+        kept_n = np.bincount(pix[kd], minlength=P)
+        stats: dict[str, Stat] = {}
+        if self.packing:
+            order, rgba, stats = self._resolve_packed(trace, g, values, kept, alpha)
+        else:
+            order, rgba, stats = self._colour_pass(trace, g, plan, kd)
+        res = lambda i, s: entry_index(i, s, L, P, layout)  # noqa: E731
+        sentinel = kept_n + (kept_n < L)          # the load that finds the first empty entry ends the walk
+        pixels = np.arange(P)
+        plan.add(resolve_pass, "load", "depth_array", pixels, sentinel,
+                 lambda i, s: res(i, s) * DEPTH_BYTES, DEPTH_BYTES)
+        plan.add(resolve_pass, "load", "colour_array", pixels, kept_n, lambda i, s: res(i, s) * cb, cb)
+
+        if self.direction == "max":      # entries descend: the resolve reads them back to front
+            order, rgba = self._reverse_runs(pix, order, rgba)
+        image = composite_image(trace, pix[order], rgba, rgba[:, 3])
+        struct = [Structure("depth_array", DEPTH_BYTES, P * L, len(kd),
+                            "32-bit depth per entry" + (" (20-bit depth + 12 colour bits)" if self.packing else "")),
+                  Structure("colour_array", cb, P * L, len(kept["colour_array"]) if self.packing else len(kd),
+                            "20-bit depth + 12 colour bits per entry" if self.packing
+                            else f"{self.colour_format} colour per entry (second pass)")]
+        atomics = int(plan.accesses()["depth_array"][atomic])
+        stats["atomic_operations"] = Stat(sum(v.get(atomic, 0) for v in plan.accesses().values()), "operations",
+                                          f"{atomic} operations in the capture pass (all arrays)")
+        stats["depth_chain_atomics"] = Stat(atomics, "operations", f"{atomic} operations on depth_array")
+        return SchemeResult(self.name, self.params(), image, n, g.covered, struct, plan,
+                            geometry_passes=1 if self.packing else 2,
+                            dropped_fragments=int(n - len(kd)),
+                            overflowed_pixels=int(np.count_nonzero(g.count > kept_n)),
+                            lists=CapturedLists(pix[order], order), stats=stats)
+
+    # ---------------------------------------------------------------- colour
+    def _colour_pass(self, trace, g, plan, kd):
+        """Second geometry pass: find own depth in the final array, store colour there."""
+        P, L, n, pix = trace.pixel_count, self.layers, len(trace), g.pix
+        cb = COLOUR_BYTES[self.colour_format]
+        slot_of_kept = rank_in_runs(pix[kd])
+        combined = (pix.astype(np.uint64) << np.uint64(32)) | g.key.astype(np.uint64)
+        # equal values sit next to each other in the array: the first occurrence is the lowest slot
+        uniq, first = np.unique(combined[kd], return_index=True)
+        pos = np.minimum(np.searchsorted(uniq, combined), max(len(uniq) - 1, 0))
+        found = (uniq[pos] == combined) if len(uniq) else np.zeros(n, bool)
+        entry = np.where(found, first[pos] if len(uniq) else 0, -1)
+        # loads: walk until own value (slot + 1 loads) or to the end of the array (L loads)
+        slot = np.where(found, slot_of_kept[np.maximum(entry, 0)] if len(kd) else 0, L - 1)
+        layout = self.layout
+        plan.add(2, "load", "depth_array", np.arange(n), slot + 1,
+                 lambda i, s: entry_index(pix[i], s, L, P, layout) * DEPTH_BYTES, DEPTH_BYTES)
+        writers = np.flatnonzero(found)
+        plan.add(2, "store", "colour_array", writers, 1,
+                 lambda i, s: entry_index(pix[writers[i]], slot[writers[i]], L, P, layout) * cb, cb, dep=True)
+        # the last writer (submission order) of each entry wins
+        winner = np.full(len(kd), -1, np.int64)
+        np.maximum.at(winner, entry[writers], writers)
+        rgba = np.zeros((len(kd), 4), np.float32)          # cleared colour: transparent black
+        has = winner >= 0
+        rgba[has] = store_colour(trace.rgba[winner[has]], self.colour_format)
+        rgba[has & trace.opaque[np.maximum(winner, 0)], 3] = 1.0
+        stats = {"colour_collisions": Stat(int(len(writers) - has.sum()), "fragments",
+                                           "colour stores overwritten by an equal-depth fragment's store")}
+        return kd, rgba, stats
+
+    # ---------------------------------------------------------------- packing
+    def _packing_alpha(self, trace, g) -> float:
+        if self.alpha is not None:
+            return float(self.alpha)
+        if len(trace) == 0:
+            return 1.0
+        lo, hi = float(g.alpha.min()), float(g.alpha.max())
+        if lo != hi:
+            raise GpusimError(f"packing stores no alpha (seed 000 section 4.1.2 assumes a constant one) but this "
+                              f"trace's alpha ranges {lo:g}..{hi:g} (opaque = 1); pass --param alpha=VALUE to use one")
+        return lo
+
+    def _resolve_packed(self, trace, g, values, kept, alpha):
+        kd, kc = kept["depth_array"], kept["colour_array"]
+        # the resolve reads entry i of both arrays; use the slots both arrays filled
+        both = np.minimum(np.bincount(g.pix[kd], minlength=trace.pixel_count),
+                          np.bincount(g.pix[kc], minlength=trace.pixel_count))
+        kd = kd[rank_in_runs(g.pix[kd]) < both[g.pix[kd]]]
+        kc = kc[rank_in_runs(g.pix[kc]) < both[g.pix[kc]]]
+        pd_ = g.pix[kd]
+        c24 = ((values["depth_array"][kd] & np.uint32(0xFFF)) << np.uint32(12)) | \
+              (values["colour_array"][kc] & np.uint32(0xFFF))
+        rgba = np.empty((len(kd), 4), np.float32)
+        rgba[:, :3] = colour24_rgb(c24)
+        rgba[:, 3] = alpha
+        true24 = colour24(trace.rgba[kd, :3])
+        z = trace.z[kd]
+        same_pixel = pd_[1:] == pd_[:-1]
+        step = np.diff(z) if self.direction == "min" else -np.diff(z)
+        inversions = int(np.count_nonzero(same_pixel & (step < 0)))
+        d20 = values["depth_array"][kd] >> np.uint32(12)
+        collisions = int(np.count_nonzero(same_pixel & (d20[1:] == d20[:-1]) & (z[1:] != z[:-1])))
+        stats = {
+            "packing_colour_mismatches": Stat(int(np.count_nonzero(c24 != true24)), "entries",
+                                              "entries whose reassembled colour is not their depth's fragment's"),
+            "packing_order_inversions": Stat(inversions, "entry pairs",
+                                             "adjacent entries stored in the wrong true-depth order"),
+            "packing_depth_collisions": Stat(collisions, "entry pairs",
+                                             "adjacent entries whose distinct depths share a 20-bit packed depth"),
+        }
+        return kd, rgba, stats
+
+    @staticmethod
+    def _reverse_runs(pix, order, rgba):
+        p = pix[order]
+        key = np.lexsort((-np.arange(len(order)), p))
+        return order[key], rgba[key]

@@ -1,0 +1,131 @@
+"""The k-buffer (Bavoil et al., seed 004): k entries per pixel, read-modify-write per fragment.
+
+Every fragment's program reads the pixel's k entries, modifies them and writes
+them back (section 3: Read, Modify, Write). On current hardware (section 3.2)
+the entries are MRT textures read through the texture path, so each fragment
+issues k ``rmw_read`` s and k ``rmw_write`` s of one entry (depth + colour);
+the timing model finds the read-modify-write hazards between fragments of one
+pixel from exactly these operations. This functional model is the hazard-free
+result (fragments applied one at a time in submission order).
+
+Modes:
+
+* ``peel`` (section 4.1): insertion sort keeps the k nearest fragments (an
+  incoming fragment goes behind stored ones of equal depth); a full-screen
+  resolve composites them. Fragments beyond the k nearest are dropped.
+* ``sort-blend`` (section 4.3): when a fragment arrives at a full k-buffer the
+  nearest of the k + 1 is composited front to back into an RGBA32F framebuffer
+  (also read and written by every fragment, as an MRT) and leaves; the resolve
+  composites what remains, nearest first. Exact for a k-nearly-sorted input;
+  otherwise fragments are composited out of order (``misordered_pairs``).
+
+Heuristics of section 3.2, applied to the trace first: ``order = centroid``
+sorts primitives front to back by centroid depth (see gpusim.schemes.reorder);
+``batch = N`` splits the primitives into batches of N with a pipeline flush
+(a ``flush`` pass with no memory operations) between. Both leave this
+functional result unchanged (peel) or improve it (sort-blend, by ordering);
+their cost and their effect on hazards are the timing model's to measure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.schemes.arrays import entry_index, smallest_per_pixel
+from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.depth_filter import emit_order
+from gpusim.schemes.groups import PixelGroups
+from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.reorder import batch_index, centroid_order, permuted
+from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
+
+FRAMEBUFFER_BYTES = 16   # RGBA32F off-screen framebuffer (one MRT attachment)
+
+
+@register("kbuffer")
+@dataclass(frozen=True)
+class KBuffer(Scheme):
+    summary = "k-buffer: k-entry RMW pool per pixel (peel or sort-and-blend)"
+
+    k: int = param(8, unit="entries/pixel", doc="k-buffer entries per pixel", min=1, max=64)
+    mode: Literal["peel", "sort-blend"] = param("peel", doc="keep the k nearest, or blend a k-nearly-sorted stream")
+    colour_format: ColourFormat = param("rgba32f", doc="entry colour format (the paper's FP32 MRTs)")
+    order: Literal["submission", "centroid"] = param("submission", doc="primitive order (centroid: sort heuristic)")
+    batch: int = param(0, unit="primitives", doc="primitives per batch with a flush between (0: no batching)", min=0)
+
+    def simulate(self, trace) -> SchemeResult:
+        n, P, k = len(trace), trace.pixel_count, self.k
+        submission = centroid_order(trace) if self.order == "centroid" else np.arange(n)
+        t = permuted(trace, submission) if self.order == "centroid" else trace
+        g = PixelGroups(t)
+        pix = g.pix
+        entry_bytes = DEPTH_BYTES + COLOUR_BYTES[self.colour_format]
+        blend = self.mode == "sort-blend"
+
+        passes = [Pass("clear", "clear", "entry")]
+        if self.batch:
+            batches = batch_index(t, np.arange(n), self.batch)
+            n_batches = int(batches.max()) + 1 if n else 0
+            for b in range(n_batches):
+                if b:
+                    passes.append(Pass(f"flush {b}", "flush", "none"))
+                passes.append(Pass(f"capture batch {b}", "geometry", "fragment"))
+            frag_pass = 1 + 2 * batches
+        else:
+            n_batches = 1
+            passes.append(Pass("capture", "geometry", "fragment"))
+            frag_pass = 1
+        passes.append(Pass("resolve", "fullscreen", "pixel"))
+        resolve = len(passes) - 1
+        structures = ["kbuffer"] + (["framebuffer"] if blend else [])
+        plan = OpPlan(passes, structures)
+        plan.add(0, "store", "kbuffer", np.arange(P * k), 1, lambda i, s: i * entry_bytes, entry_bytes)
+        if blend:
+            plan.add(0, "store", "framebuffer", np.arange(P), 1, lambda i, s: i * FRAMEBUFFER_BYTES,
+                     FRAMEBUFFER_BYTES)
+        frags = np.arange(n)
+        at = lambda i, s: entry_index(pix[i], s, k, P, "layer-major") * entry_bytes  # noqa: E731  (k MRT planes)
+        plan.add(frag_pass, "rmw_read", "kbuffer", frags, k, at, entry_bytes)
+        if blend:
+            fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
+            plan.add(frag_pass, "rmw_read", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES)
+        plan.add(frag_pass, "rmw_write", "kbuffer", frags, k, at, entry_bytes, dep=True)
+        if blend:
+            plan.add(frag_pass, "rmw_write", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES, dep=True)
+        pixels = np.arange(P)
+        plan.add(resolve, "load", "kbuffer", pixels, k,
+                 lambda i, s: entry_index(i, s, k, P, "layer-major") * entry_bytes, entry_bytes)
+        if blend:
+            plan.add(resolve, "load", "framebuffer", pixels, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
+                     FRAMEBUFFER_BYTES)
+
+        stats: dict[str, Stat] = {"batches": Stat(n_batches, "batches", "geometry batches (flushes + 1)")}
+        if blend:
+            order = emit_order(pix, g.key, g.by_arrival, k)
+            kept_count = n
+            z = t.z[order].astype(np.float64)
+            same = pix[order][1:] == pix[order][:-1]
+            stats["misordered_pairs"] = Stat(int(np.count_nonzero(same & (np.diff(z) < 0))), "fragment pairs",
+                                             "consecutively composited fragments in the wrong depth order")
+            used = int(np.minimum(g.count, k).sum())
+        else:
+            order = smallest_per_pixel(pix, g.key, k)
+            kept_count = len(order)
+            used = kept_count
+        rgba = store_colour(t.rgba[order], self.colour_format)
+        alpha = np.where(t.opaque[order], np.float32(1.0), rgba[:, 3])
+        image = composite_image(t, pix[order], rgba, alpha)
+        struct = [Structure("kbuffer", entry_bytes, P * k, used, f"k entries of depth + {self.colour_format} colour")]
+        if blend:
+            struct.append(Structure("framebuffer", FRAMEBUFFER_BYTES, P, g.covered, "RGBA32F blend target (MRT)"))
+        dropped = n - kept_count
+        return SchemeResult(self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
+                            dropped_fragments=int(dropped),
+                            overflowed_pixels=0 if blend else int(np.count_nonzero(g.count > k)),
+                            lists=CapturedLists(pix[order], submission[order]), stats=stats,
+                            submission=submission)
