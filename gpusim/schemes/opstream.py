@@ -77,6 +77,7 @@ class OpGroup:
     offset: Callable[[np.ndarray, np.ndarray], np.ndarray]
     bytes: int
     dep: bool
+    pass_fn: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None   # pass of each op (i, seq)
 
     @property
     def total(self) -> int:
@@ -93,8 +94,12 @@ class OpPlan:
 
     def add(self, pass_index, op: str, structure: str, thread: np.ndarray, count,
             offset: Callable[[np.ndarray, np.ndarray], np.ndarray], nbytes: int,
-            dep: bool = False) -> None:
-        """Append a group in program order (after the groups already added for these threads)."""
+            dep: bool = False, pass_fn=None) -> None:
+        """Append a group in program order (after the groups already added for these threads).
+
+        ``pass_fn(i, seq)`` gives the pass of each operation when one thread's
+        operations of this group span several passes (``pass_index`` is then ignored).
+        """
         if op not in OPS:
             raise ValueError(f"unknown operation {op!r}")
         if structure not in self.structures:
@@ -106,7 +111,7 @@ class OpPlan:
         if len(thread) and not (0 <= np.min(pass_index) and np.max(pass_index) < len(self.passes)):
             raise ValueError(f"pass index out of range 0..{len(self.passes) - 1}")
         if len(thread) and int(count.sum()) > 0:
-            self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep))
+            self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep, pass_fn))
 
     def total_ops(self) -> int:
         return sum(g.total for g in self.groups)
@@ -118,22 +123,6 @@ class OpPlan:
             ops = out.setdefault(g.structure, {})
             ops[g.op] = ops.get(g.op, 0) + g.total
         return out
-
-    def accesses_by_pass(self) -> list[dict]:
-        """Tidy rows: pass, structure, operation, count, bytes."""
-        rows: dict[tuple, list[int]] = {}
-        for g in self.groups:
-            if np.isscalar(g.pass_index):
-                per_pass = {int(g.pass_index): g.total}
-            else:
-                sums = np.bincount(g.pass_index, weights=g.count, minlength=len(self.passes))
-                per_pass = {p: int(c) for p, c in enumerate(sums) if c}
-            for p, total in per_pass.items():
-                acc = rows.setdefault((self.passes[p].name, g.structure, g.op), [0, 0])
-                acc[0] += total
-                acc[1] += total * g.bytes
-        return [{"pass": k[0], "structure": k[1], "op": k[2], "count": v[0], "bytes": v[1]}
-                for k, v in rows.items()]
 
     def expand(self, bases: dict[str, int], max_ops: int = DEFAULT_MAX_OPS) -> "OpStream":
         """One row per operation, ordered by (pass, thread, program order)."""
@@ -149,8 +138,12 @@ class OpPlan:
             first = np.cumsum(g.count) - g.count
             seq = np.arange(n, dtype=np.int64) - np.repeat(first, g.count)
             offset = np.asarray(g.offset(i, seq), dtype=np.uint64)
-            cols["pass_index"].append(np.full(n, g.pass_index, np.uint32) if np.isscalar(g.pass_index)
-                                      else g.pass_index[i].astype(np.uint32))
+            if g.pass_fn is not None:
+                cols["pass_index"].append(np.asarray(g.pass_fn(i, seq), dtype=np.uint32))
+            elif np.isscalar(g.pass_index):
+                cols["pass_index"].append(np.full(n, g.pass_index, np.uint32))
+            else:
+                cols["pass_index"].append(g.pass_index[i].astype(np.uint32))
             cols["thread"].append(g.thread[i])
             cols["op"].append(np.full(n, OPS.index(g.op), np.uint8))
             cols["structure"].append(np.full(n, self.structures.index(g.structure), np.uint8))

@@ -1,0 +1,168 @@
+"""Depth peeling (Everitt 2001) and dual depth peeling (Bavoil & Myers 2008).
+
+``depth-peeling``: geometry pass p renders every fragment; from pass 1 on each
+fragment ``load`` s the previous pass's depth (``peel_depth``) and is kept only
+if strictly farther; kept fragments go through the ROP ``depth_test`` (LESS,
+with a conditional depth + colour write) against ``depth_buffer``. Pass p thus
+peels the p-th nearest *distinct* depth of each pixel; of several fragments at
+exactly that depth, the first submitted wins the depth test and the others are
+never peeled (``tie_losses``, counted in ``dropped_fragments``). A full-screen
+``blend`` pass after each peel composites the layer under the accumulation.
+
+``dual-depth-peeling``: pass 0 MAX-blends (-z, z) into ``minmax_depth``; pass
+k >= 1 loads the previous min/max; fragments at the previous min are blended
+(in submission order, front to back) into ``front_colour``, those at the
+previous max into ``back_colour`` (back to front, so among equal depths the
+later submitted ends nearer), and those strictly between MAX-blend the next
+min/max. Each pass peels two layers; equal depths are never lost.
+
+Pass counts follow FreePipe Table 3 (``termination = known-layers``): depth
+peeling needs L geometry passes and dual depth peeling ceil(L / 2) + 1, where L
+is the largest number of distinct depths of a pixel. With ``termination =
+occlusion-query`` depth peeling runs one more pass, the one whose query finds
+no fragment left (dual depth peeling's last pass already finds its inner
+range empty). ``max_passes`` caps the peel passes; deeper layers are dropped.
+Accumulation arithmetic is float32; stored layer colours use ``colour_format``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.groups import PixelGroups
+from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
+
+Termination = Literal["known-layers", "occlusion-query"]
+
+
+def _layers(g: PixelGroups) -> np.ndarray:
+    """Distinct depths per pixel."""
+    lay = np.zeros(g.pixel_count, np.int64)
+    if g.n:
+        np.maximum.at(lay, g.pix, g.distinct_rank + 1)
+    return lay
+
+
+def _image(trace, g, order, colour_format):
+    rgba = store_colour(trace.rgba[order], colour_format)
+    alpha = np.where(trace.opaque[order], np.float32(1.0), rgba[:, 3])
+    return composite_image(trace, g.pix[order], rgba, alpha)
+
+
+@register("depth-peeling")
+@dataclass(frozen=True)
+class DepthPeeling(Scheme):
+    summary = "depth peeling: one geometry pass per layer (Everitt 2001)"
+
+    max_passes: int = param(0, unit="passes", doc="cap on peel passes (0: as many as the scene needs)", min=0)
+    termination: Termination = param("known-layers", doc="pass count as FreePipe Table 3, or +1 occlusion-query pass")
+    colour_format: ColourFormat = param("rgba8", doc="format of the peeled layer's colour")
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P = len(trace), trace.pixel_count
+        pix, d = g.pix, g.distinct_rank
+        lay = _layers(g)
+        need = int(lay.max(initial=0))
+        peels = min(need, self.max_passes) if self.max_passes else need
+        query = self.termination == "occlusion-query" and peels == need
+        total = peels + (1 if query and n else 0)
+        passes = []
+        for p in range(total):
+            passes.append(Pass(f"peel {p}", "geometry", "fragment"))
+            if p < peels:
+                passes.append(Pass(f"blend {p}", "fullscreen", "pixel"))
+        passes = passes or [Pass("peel 0", "geometry", "fragment")]
+        cb = COLOUR_BYTES[self.colour_format]
+        plan = OpPlan(passes, ["depth_buffer", "peel_depth", "layer_colour", "accumulation"])
+        frags, pixels = np.arange(n), np.arange(P)
+        at = lambda size: (lambda i, s: pix[i] * size)  # noqa: E731
+        plan.add(0, "load", "peel_depth", frags, max(total - 1, 0), at(DEPTH_BYTES), DEPTH_BYTES,
+                 pass_fn=lambda i, s: 2 * (s + 1))
+        plan.add(0, "depth_test", "depth_buffer", frags, np.minimum(d + 1, peels), at(DEPTH_BYTES + cb),
+                 DEPTH_BYTES + cb, dep=True, pass_fn=lambda i, s: 2 * s)
+        peeled = np.minimum(lay, peels)
+        plan.add(0, "load", "layer_colour", pixels, peeled, lambda i, s: i * cb, cb, pass_fn=lambda i, s: 2 * s + 1)
+        plan.add(0, "blend", "accumulation", pixels, peeled, lambda i, s: i * cb, cb, dep=True,
+                 pass_fn=lambda i, s: 2 * s + 1)
+
+        order = g.by_depth
+        first_of_depth = np.r_[True, (pix[order][1:] != pix[order][:-1]) | (g.key[order][1:] != g.key[order][:-1])]
+        keep = first_of_depth & (d[order] < peels)
+        order = order[keep]
+        ties = int(n - np.count_nonzero(first_of_depth))
+        struct = [Structure("depth_buffer", DEPTH_BYTES, P, g.covered, "depth of the layer being peeled"),
+                  Structure("peel_depth", DEPTH_BYTES, P, g.covered, "depth peeled by the previous pass"),
+                  Structure("layer_colour", cb, P, g.covered, f"{self.colour_format} colour of the peeled layer"),
+                  Structure("accumulation", cb, P, g.covered, "front-to-back accumulated colour")]
+        return SchemeResult(self.name, self.params(), _image(trace, g, order, self.colour_format), n, g.covered,
+                            struct, plan, geometry_passes=total, dropped_fragments=int(n - len(order)),
+                            overflowed_pixels=int(np.count_nonzero(lay > peels)),
+                            lists=CapturedLists(pix[order], order),
+                            stats={"tie_losses": Stat(ties, "fragments", "fragments never peeled: equal depth to a "
+                                                      "fragment submitted earlier"),
+                                   "layers": Stat(need, "layers", "largest number of distinct depths of a pixel")})
+
+
+@register("dual-depth-peeling")
+@dataclass(frozen=True)
+class DualDepthPeeling(Scheme):
+    summary = "dual depth peeling: nearest and farthest layer per pass (Bavoil & Myers 2008)"
+
+    max_passes: int = param(0, unit="passes", doc="cap on peel passes after the first (0: as many as needed)", min=0)
+    colour_format: ColourFormat = param("rgba8", doc="format of the front and back accumulation colours")
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P = len(trace), trace.pixel_count
+        pix, d = g.pix, g.distinct_rank
+        lay = _layers(g)
+        e = lay[pix] - 1 - d                      # distinct rank from the back
+        m = np.minimum(d, e)                      # peeled in pass m + 1
+        need = -(-int(lay.max(initial=0)) // 2)
+        peels = min(need, self.max_passes) if self.max_passes else need
+        passes = [Pass("init", "geometry", "fragment")] + [Pass(f"peel {k}", "geometry", "fragment")
+                                                          for k in range(1, peels + 1)]
+        passes.append(Pass("final", "fullscreen", "pixel"))
+        cb, mm = COLOUR_BYTES[self.colour_format], 2 * DEPTH_BYTES
+        plan = OpPlan(passes, ["minmax_depth", "front_colour", "back_colour"])
+        frags, pixels = np.arange(n), np.arange(P)
+        # two ping-pong min/max textures: pass k reads texture (k-1) % 2 and writes k % 2
+        tex = lambda i, s, k: ((k % 2) * P + pix[i]) * mm  # noqa: E731
+        plan.add(0, "blend", "minmax_depth", frags, 1, lambda i, s: tex(i, s, 0), mm)
+        plan.add(0, "load", "minmax_depth", frags, peels, lambda i, s: tex(i, s, s), mm, pass_fn=lambda i, s: s + 1)
+        inside = np.minimum(m, peels)
+        plan.add(0, "blend", "minmax_depth", frags, inside, lambda i, s: tex(i, s, s + 1), mm, dep=True,
+                 pass_fn=lambda i, s: s + 1)
+        peeled = m < peels
+        front = peeled & (d <= e)
+        for name, sel in (("front_colour", front), ("back_colour", peeled & ~front)):
+            who = np.flatnonzero(sel)
+            plan.add(0, "blend", name, who, 1, lambda i, s, who=who: pix[who[i]] * cb, cb, dep=True,
+                     pass_fn=lambda i, s, who=who: m[who[i]] + 1)
+        final = len(passes) - 1
+        plan.add(final, "load", "front_colour", pixels, 1, lambda i, s: i * cb, cb)
+        plan.add(final, "load", "back_colour", pixels, 1, lambda i, s: i * cb, cb)
+
+        # composite order: front layers by depth (ties: submission), then back layers by depth
+        # with ties reversed (back-to-front 'over' blending makes the later one nearer)
+        idx = np.flatnonzero(peeled)
+        is_back = ~front[idx]
+        tiebreak = np.where(is_back, -idx, idx)
+        order = idx[np.lexsort((tiebreak, g.key[idx], pix[idx]))]
+        struct = [Structure("minmax_depth", mm, 2 * P, 2 * g.covered, "two ping-pong RG32F (-min, max) textures"),
+                  Structure("front_colour", cb, P, g.covered, "front-to-back accumulated colour"),
+                  Structure("back_colour", cb, P, g.covered, "back-to-front accumulated colour")]
+        return SchemeResult(self.name, self.params(), _image(trace, g, order, self.colour_format), n, g.covered,
+                            struct, plan, geometry_passes=1 + peels, dropped_fragments=int(n - len(order)),
+                            overflowed_pixels=int(np.count_nonzero(-(-lay // 2) > peels)),
+                            lists=CapturedLists(pix[order], order),
+                            stats={"layers": Stat(int(lay.max(initial=0)), "layers",
+                                                  "largest number of distinct depths of a pixel")})
