@@ -5,7 +5,8 @@ Importing this package registers every scheme; select one by its CLI name with
 gpusim.schemes.opstream for the operations a scheme reports.
 """
 
-from gpusim.schemes import depth_peeling, freepipe_abuffer, freepipe_mdts, kbuffer  # noqa: F401  (registers)
+from gpusim.schemes import (  # noqa: F401  (importing registers each scheme)
+    blending, depth_peeling, freepipe_abuffer, freepipe_mdts, kbuffer, linked_list, srab)
 from gpusim.schemes.base import REGISTRY, Scheme, describe_scheme, make_scheme, scheme_class, scheme_names
 from gpusim.schemes.result import SchemeResult
 

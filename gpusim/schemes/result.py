@@ -76,6 +76,7 @@ class SchemeResult:
     lists: CapturedLists | None = None
     stats: dict[str, Stat] = field(default_factory=dict)
     submission: np.ndarray | None = None   # trace index of each fragment thread (after reordering)
+    extras: dict[str, Any] = field(default_factory=dict)   # scheme artefacts for inspection (not stats)
 
     @property
     def passes(self):

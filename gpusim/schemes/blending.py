@@ -1,0 +1,230 @@
+"""The one-pass blending baselines: unsorted alpha blending and weighted blended OIT.
+
+``alpha-blend``: hardware "over" blending in submission order, no sorting, as
+LucidRaster's baseline (seed 002): C = a c + (1 - a) C, rounded to the
+framebuffer format after every blend (the ROP's ``blend`` operation).
+
+``wboit``: McGuire & Bavoil 2013. One pass accumulates sum(w a c, w a) into an
+accumulation target (additive blending) and prod(1 - a) into a revealage target
+(multiplicative blending), each rounded to its format after every blend; a
+full-screen pass composites C = accum.rgb / clamp(accum.a, 1e-4, 5e4) *
+(1 - revealage) + revealage * background. Weight functions (the paper's
+equations 7-10, clamps included) with view-space depth |z| and window depth d:
+
+* eq7: a * clamp(10 / (1e-5 + (|z|/5)^2 + (|z|/200)^6), 1e-2, 3e3)
+* eq8: a * clamp(10 / (1e-5 + (|z|/10)^3 + (|z|/200)^6), 1e-2, 3e3)
+* eq9: a * clamp(0.03 / (1e-5 + (|z|/200)^4), 1e-2, 3e3)
+* eq10: a * max(1e-2, 3e3 * (1 - d)^3)
+* constant: a (plain weighted average)
+
+|z| is recovered from window depth with the camera's near and far planes
+(from the trace's scene metadata, or the ``near`` / ``far`` parameters).
+
+Opaque fragments (``opaque = prepass``, the usual practice): a depth-tested
+pass draws the nearest opaque fragment of each pixel (first submitted on equal
+depth) and fills ``depth_buffer``; transparent fragments behind it fail the
+depth test (``culled_fragments``) and the transparent result is blended over
+the opaque image. With ``opaque = blend`` opaque fragments are blended like
+any other with alpha 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.errors import GpusimError
+from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.fold import fold, rounder
+from gpusim.schemes.groups import PixelGroups, segment_running_min_before
+from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.result import SchemeResult, Stat, Structure
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES
+
+OpaqueMode = Literal["prepass", "blend"]
+REVEALAGE_BYTES = {"r8": 1, "r16f": 2, "r32f": 4}
+
+
+def _opaque_prepass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colour_bytes: int,
+                    colour_round) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Depth-tested opaque pass: (colour image (P,3), transparent mask, depth test passes, culled)."""
+    P = trace.pixel_count
+    opaque = trace.opaque
+    op_idx = np.flatnonzero(opaque)
+    pix = g.pix
+    zbuf = np.full(P, np.uint64(1) << np.uint64(32))
+    colour = np.empty((P, 3), np.float32)
+    colour[:] = trace.background.astype(np.float32)
+    if len(op_idx):
+        nearest = op_idx[np.lexsort((op_idx, g.key[op_idx], pix[op_idx]))]
+        first = np.r_[True, pix[nearest][1:] != pix[nearest][:-1]]
+        winners = nearest[first]
+        zbuf[pix[winners]] = g.key[winners]
+        colour[pix[winners]] = colour_round(trace.rgba[winners, :3])
+        # colour stores: opaque fragments that pass LESS against the earlier opaque ones
+        by_pix = op_idx[np.argsort(pix[op_idx], kind="stable")]
+        before = segment_running_min_before(pix[by_pix], g.key[by_pix])
+        writes = by_pix[g.key[by_pix] < before]
+    else:
+        writes = op_idx
+    plan.add(pass_index, "depth_test", "depth_buffer", op_idx, 1, lambda i, s: pix[op_idx[i]] * DEPTH_BYTES,
+             DEPTH_BYTES)
+    plan.add(pass_index, "store", "framebuffer", writes, 1, lambda i, s: pix[writes[i]] * colour_bytes,
+             colour_bytes, dep=True)
+    transparent = ~opaque & (g.key < zbuf[pix])
+    culled = int(np.count_nonzero(~opaque & ~transparent))
+    return colour, transparent, zbuf, culled
+
+
+@register("alpha-blend")
+@dataclass(frozen=True)
+class AlphaBlend(Scheme):
+    summary = "unsorted hardware alpha blending in submission order (the baseline)"
+
+    framebuffer_format: Literal["rgba8", "rgba16f", "rgba32f"] = param("rgba8", doc="framebuffer format")
+    opaque: OpaqueMode = param("prepass", doc="opaque fragments: depth-tested pre-pass, or blended with alpha 1")
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P, pix = len(trace), trace.pixel_count, g.pix
+        cb = COLOUR_BYTES[self.framebuffer_format]
+        rnd = rounder(self.framebuffer_format)
+        prepass = self.opaque == "prepass"
+        passes = ([Pass("opaque", "geometry", "fragment")] if prepass else []) + \
+            [Pass("transparent", "geometry", "fragment")]
+        plan = OpPlan(passes, (["depth_buffer"] if prepass else []) + ["framebuffer"])
+        if prepass:
+            colour, blended, _, culled = _opaque_prepass(trace, g, plan, 0, cb, rnd)
+            t_idx = np.flatnonzero(~trace.opaque)
+            plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
+        else:
+            colour = np.empty((P, 3), np.float32)
+            colour[:] = rnd(trace.background.astype(np.float32))
+            blended, culled = np.ones(n, bool), 0
+        b_idx = np.flatnonzero(blended)
+        plan.add(len(passes) - 1, "blend", "framebuffer", b_idx, 1, lambda i, s: pix[b_idx[i]] * cb, cb,
+                 dep=prepass)
+        rgb, alpha = trace.rgba[:, :3], g.alpha
+
+        def step(state, f):
+            a = alpha[f][:, None]
+            return rnd(a * rgb[f] + (1 - a) * state)
+
+        order = g.by_arrival[blended[g.by_arrival]]
+        image = fold(pix, order, colour, step)
+        struct = [Structure("framebuffer", cb, P, g.covered, f"{self.framebuffer_format} colour")]
+        if prepass:
+            struct.insert(0, Structure("depth_buffer", DEPTH_BYTES, P,
+                                       len(np.unique(pix[trace.opaque])), "opaque depth (pre-pass)"))
+        return SchemeResult(self.name, self.params(), image.reshape(trace.height, trace.width, 3), n, g.covered,
+                            struct, plan, geometry_passes=1, dropped_fragments=0, overflowed_pixels=0,
+                            stats={"culled_fragments": Stat(culled, "fragments",
+                                                            "transparent fragments behind an opaque one")})
+
+
+def _view_depth(d: np.ndarray, near: float, far: float) -> np.ndarray:
+    """|z| in scene units from window depth d in [0, 1] under a perspective projection."""
+    return near * far / (far - d.astype(np.float64) * (far - near))
+
+
+@register("wboit")
+@dataclass(frozen=True)
+class WeightedBlendedOIT(Scheme):
+    summary = "weighted blended OIT (McGuire & Bavoil 2013), one pass, approximate"
+
+    weight: Literal["eq7", "eq8", "eq9", "eq10", "constant"] = param("eq10", doc="weight function (paper eq. 7-10)")
+    accum_format: Literal["rgba16f", "rgba32f"] = param("rgba16f", doc="accumulation target format")
+    revealage_format: Literal["r8", "r16f", "r32f"] = param("r16f", doc="revealage target format")
+    opaque: OpaqueMode = param("prepass", doc="opaque fragments: depth-tested pre-pass, or blended with alpha 1")
+    near: float | None = param(None, unit="scene units", doc="near plane for eq7-9 (default: the trace's camera)",
+                               gt=0.0)
+    far: float | None = param(None, unit="scene units", doc="far plane for eq7-9 (default: the trace's camera)",
+                              gt=0.0)
+
+    def _planes(self, trace) -> tuple[float, float]:
+        cam = trace.meta.get("scene_config", {}).get("camera", {})
+        near = self.near if self.near is not None else cam.get("near")
+        far = self.far if self.far is not None else cam.get("far")
+        if near is None or far is None:
+            raise GpusimError(f"wboit weight {self.weight} needs view-space depth but the trace records no camera; "
+                              "pass --param near=N --param far=F, or use --param weight=eq10")
+        if not far > near:
+            raise GpusimError(f"wboit: far ({far}) must be greater than near ({near})")
+        return float(near), float(far)
+
+    def weights(self, trace, alpha: np.ndarray) -> np.ndarray:
+        d = trace.z.astype(np.float64)
+        if self.weight == "constant":
+            w = np.ones_like(d)
+        elif self.weight == "eq10":
+            w = np.maximum(1e-2, 3e3 * (1.0 - d) ** 3)
+        else:
+            z = _view_depth(d, *self._planes(trace))
+            if self.weight == "eq7":
+                w = 10.0 / (1e-5 + (z / 5.0) ** 2 + (z / 200.0) ** 6)
+            elif self.weight == "eq8":
+                w = 10.0 / (1e-5 + (z / 10.0) ** 3 + (z / 200.0) ** 6)
+            else:
+                w = 0.03 / (1e-5 + (z / 200.0) ** 4)
+            w = np.clip(w, 1e-2, 3e3)
+        return (alpha * w).astype(np.float32)
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P, pix = len(trace), trace.pixel_count, g.pix
+        ab, rb = COLOUR_BYTES[self.accum_format], REVEALAGE_BYTES[self.revealage_format]
+        acc_round, rev_round = rounder(self.accum_format), rounder(self.revealage_format)
+        prepass = self.opaque == "prepass"
+        passes = ([Pass("opaque", "geometry", "fragment")] if prepass else []) + \
+            [Pass("transparent", "geometry", "fragment"), Pass("composite", "fullscreen", "pixel")]
+        plan = OpPlan(passes, (["depth_buffer", "framebuffer"] if prepass else []) + ["accumulation", "revealage"])
+        if prepass:
+            base, blended, _, culled = _opaque_prepass(trace, g, plan, 0, 4, rounder("rgba8"))
+            t_idx = np.flatnonzero(~trace.opaque)
+            plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
+        else:
+            base = np.empty((P, 3), np.float32)
+            base[:] = trace.background.astype(np.float32)
+            blended, culled = np.ones(n, bool), 0
+        tp = len(passes) - 2
+        b_idx = np.flatnonzero(blended)
+        plan.add(tp, "blend", "accumulation", b_idx, 1, lambda i, s: pix[b_idx[i]] * ab, ab, dep=prepass)
+        plan.add(tp, "blend", "revealage", b_idx, 1, lambda i, s: pix[b_idx[i]] * rb, rb, dep=prepass)
+        pixels = np.arange(P)
+        plan.add(tp + 1, "load", "accumulation", pixels, 1, lambda i, s: i * ab, ab)
+        plan.add(tp + 1, "load", "revealage", pixels, 1, lambda i, s: i * rb, rb)
+        if prepass:
+            plan.add(tp + 1, "blend", "framebuffer", pixels, 1, lambda i, s: i * 4, 4, dep=True)
+
+        alpha = g.alpha
+        w = self.weights(trace, alpha)
+        premul = np.empty((n, 4), np.float32)
+        premul[:, :3] = trace.rgba[:, :3] * (alpha * w)[:, None]
+        premul[:, 3] = alpha * w
+        state = np.zeros((P, 5), np.float32)
+        state[:, 4] = 1.0
+
+        def step(s, f):
+            out = np.empty_like(s)
+            out[:, :4] = acc_round(s[:, :4] + premul[f])
+            out[:, 4] = rev_round(s[:, 4] * (1 - alpha[f]))
+            return out
+
+        order = g.by_arrival[blended[g.by_arrival]]
+        state = fold(pix, order, state, step)
+        reveal = state[:, 4:5]
+        avg = state[:, :3] / np.clip(state[:, 3:4], 1e-4, 5e4)
+        image = avg * (1 - reveal) + base * reveal
+        struct = [Structure("accumulation", ab, P, g.covered, f"{self.accum_format} sum of w*a*c and w*a"),
+                  Structure("revealage", rb, P, g.covered, f"{self.revealage_format} product of (1 - a)")]
+        if prepass:
+            opaque_px = len(np.unique(pix[trace.opaque]))
+            struct[:0] = [Structure("depth_buffer", DEPTH_BYTES, P, opaque_px, "opaque depth (pre-pass)"),
+                          Structure("framebuffer", 4, P, opaque_px, "rgba8 opaque colour")]
+        return SchemeResult(self.name, self.params(), image.reshape(trace.height, trace.width, 3), n, g.covered,
+                            struct, plan, geometry_passes=1, dropped_fragments=0, overflowed_pixels=0,
+                            stats={"culled_fragments": Stat(culled, "fragments",
+                                                            "transparent fragments behind an opaque one")})
