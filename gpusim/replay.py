@@ -1,0 +1,60 @@
+"""Replay a trace through a scheme and gather the run's record (used by ``gpusim replay``)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from gpusim.config import parse_override
+from gpusim.errors import ConfigError, GpusimError
+from gpusim.metrics import composite_exact, image_error
+from gpusim.schemes import make_scheme
+from gpusim.schemes.result import SchemeResult, Stat
+from gpusim.trace import FragmentTrace
+
+
+def parse_params(items: list[str] | None) -> dict[str, Any]:
+    """``["layers=8", "packing=true"]`` -> {"layers": 8, "packing": True} (values read as TOML)."""
+    params: dict[str, Any] = {}
+    for text in items or []:
+        parts, value = parse_override(text)
+        if len(parts) != 1:
+            raise ConfigError(f"--param {text}: scheme parameters have no dots (e.g. --param layers=8)")
+        params[parts[0]] = value
+    return params
+
+
+def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = None
+           ) -> tuple[SchemeResult, dict, Any, Any]:
+    """Run ``scheme``; returns (result, record, image, reference)."""
+    model = make_scheme(scheme, params, where=f"--scheme {scheme} --param")
+    start = time.perf_counter()
+    try:
+        result = model.run(trace)
+    except ValueError as exc:          # a value the model cannot take (e.g. NaN depth in memory)
+        raise GpusimError(f"{scheme}: {exc}") from None
+    wall = time.perf_counter() - start
+    reference = composite_exact(trace)
+    error = image_error(result.image, reference)
+    record = {
+        "scheme": scheme,
+        "params": result.params,
+        "trace": trace.source,
+        "scene": trace.meta.get("scene"),
+        "width": trace.width,
+        "height": trace.height,
+        "fragments": result.fragments,
+        "pixels": result.pixels,
+        "geometry_passes": result.geometry_passes,
+        "passes": [{"name": p.name, "kind": p.kind} for p in result.passes],
+        "footprint_bytes": result.footprint,
+        "footprint_used_bytes": result.footprint_used,
+        "accesses": result.accesses,
+        "dropped_fragments": result.dropped_fragments,
+        "overflowed_pixels": result.overflowed_pixels,
+        "stats": {k: {"value": v.value, "unit": v.unit, "doc": v.doc} for k, v in result.stats.items()
+                  if isinstance(v, Stat)},
+        "error": {k: error[k] for k in ("rmse", "psnr", "differing_pixels", "differing_share", "max_abs")},
+        "wall_seconds": wall,
+    }
+    return result, record, result.image, reference
