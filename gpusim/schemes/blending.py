@@ -216,8 +216,12 @@ class WeightedBlendedOIT(Scheme):
         order = g.by_arrival[blended[g.by_arrival]]
         state = fold(pix, order, state, step)
         reveal = state[:, 4:5]
-        avg = state[:, :3] / np.clip(state[:, 3:4], 1e-4, 5e4)
-        image = avg * (1 - reveal) + base * reveal
+        overflow = int(np.count_nonzero(~np.isfinite(state[:, :4]).all(axis=1)))
+        with np.errstate(invalid="ignore", over="ignore"):
+            avg = state[:, :3] / np.clip(state[:, 3:4], 1e-4, 5e4)
+            image = avg * (1 - reveal) + base * reveal
+        # the displayed (unorm) value of an overflowed target: +inf saturates to 1, NaN reads as 0
+        image = np.clip(np.nan_to_num(image, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
         struct = [Structure("accumulation", ab, P, g.covered, f"{self.accum_format} sum of w*a*c and w*a"),
                   Structure("revealage", rb, P, g.covered, f"{self.revealage_format} product of (1 - a)")]
         if prepass:
@@ -227,4 +231,6 @@ class WeightedBlendedOIT(Scheme):
         return SchemeResult(self.name, self.params(), image.reshape(trace.height, trace.width, 3), n, g.covered,
                             struct, plan, geometry_passes=1, dropped_fragments=0, overflowed_pixels=0,
                             stats={"culled_fragments": Stat(culled, "fragments",
-                                                            "transparent fragments behind an opaque one")})
+                                                            "transparent fragments behind an opaque one"),
+                                   "accumulation_overflow": Stat(overflow, "pixels",
+                                                                 "pixels whose accumulation target overflowed")})

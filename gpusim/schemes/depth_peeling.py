@@ -86,8 +86,8 @@ class DepthPeeling(Scheme):
         at = lambda size: (lambda i, s: pix[i] * size)  # noqa: E731
         plan.add(0, "load", "peel_depth", frags, max(total - 1, 0), at(DEPTH_BYTES), DEPTH_BYTES,
                  pass_fn=lambda i, s: 2 * (s + 1))
-        plan.add(0, "depth_test", "depth_buffer", frags, np.minimum(d + 1, peels), at(DEPTH_BYTES + cb),
-                 DEPTH_BYTES + cb, dep=True, pass_fn=lambda i, s: 2 * s)
+        plan.add(0, "depth_test", "depth_buffer", frags, np.minimum(d + 1, peels), at(DEPTH_BYTES),
+                 DEPTH_BYTES, dep=True, pass_fn=lambda i, s: 2 * s)
         peeled = np.minimum(lay, peels)
         plan.add(0, "load", "layer_colour", pixels, peeled, lambda i, s: i * cb, cb, pass_fn=lambda i, s: 2 * s + 1)
         plan.add(0, "blend", "accumulation", pixels, peeled, lambda i, s: i * cb, cb, dep=True,

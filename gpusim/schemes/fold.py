@@ -39,7 +39,10 @@ def rounder(fmt: str) -> Callable[[np.ndarray], np.ndarray]:
     if fmt in ("rgba8", "r8"):
         return lambda v: (np.rint(np.clip(v, 0, 1) * np.float32(255.0)) / np.float32(255.0)).astype(np.float32)
     if fmt in ("rgba16f", "r16f"):
-        return lambda v: v.astype(np.float16).astype(np.float32)
+        def half(v):
+            with np.errstate(over="ignore"):        # past 65504 a half target holds +inf, as hardware does
+                return v.astype(np.float16).astype(np.float32)
+        return half
     if fmt in ("rgba32f", "r32f"):
         return lambda v: v.astype(np.float32)
     raise ValueError(f"unknown render-target format {fmt!r}")

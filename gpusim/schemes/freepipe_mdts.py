@@ -123,7 +123,7 @@ class FreePipeMDTS(Scheme):
                   Structure("colour_array", cb, P * L, len(kept["colour_array"]) if self.packing else len(kd),
                             "20-bit depth + 12 colour bits per entry" if self.packing
                             else f"{self.colour_format} colour per entry (second pass)")]
-        atomics = int(plan.accesses()["depth_array"][atomic])
+        atomics = int(plan.accesses().get("depth_array", {}).get(atomic, 0))
         stats["atomic_operations"] = Stat(sum(v.get(atomic, 0) for v in plan.accesses().values()), "operations",
                                           f"{atomic} operations in the capture pass (all arrays)")
         stats["depth_chain_atomics"] = Stat(atomics, "operations", f"{atomic} operations on depth_array")

@@ -1,0 +1,83 @@
+"""``gpusim replay`` and ``gpusim schemes``: JSON, outputs, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import make_trace
+
+from gpusim.cli import main
+from gpusim.trace_io import save_trace
+
+
+@pytest.fixture
+def trace_file(tmp_path, random_trace):
+    path = tmp_path / "t.npz"
+    save_trace(random_trace, path)
+    return path
+
+
+def test_replay_json_has_the_documented_keys(trace_file, capsys):
+    assert main(["replay", str(trace_file), "--scheme", "freepipe-abuffer", "--param", "layers=8", "--json"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    for key in ("scheme", "params", "fragments", "pixels", "geometry_passes", "footprint_bytes", "accesses",
+                "dropped_fragments", "error", "wall_seconds"):
+        assert key in rec
+    assert rec["params"]["layers"] == 8
+    assert rec["footprint_bytes"]["total"] == sum(v for k, v in rec["footprint_bytes"].items() if k != "total")
+    assert set(rec["error"]) >= {"rmse", "psnr", "differing_pixels"}
+    assert rec["accesses"]["counter"]["atomic_inc"] == rec["fragments"] == 5000
+
+
+def test_replay_writes_image_difference_and_stats(trace_file, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["replay", str(trace_file), "--scheme", "wboit", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "footprint" in text and "error" in text
+    assert (out / "image.png").stat().st_size > 0 and (out / "difference.png").stat().st_size > 0
+    assert json.loads((out / "stats.json").read_text())["scheme"] == "wboit"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--scheme", "abuffer"], "unknown scheme (valid: alpha-blend"),
+    (["--scheme", "kbuffer", "--param", "kk=3"], "kk: unknown key (valid: k, mode"),
+    (["--scheme", "kbuffer", "--param", "k=0"], "k: must be >= 1"),
+    (["--scheme", "kbuffer", "--param", "k"], "expected KEY=VALUE"),
+    (["--scheme", "kbuffer", "--param", "a.b=1"], "have no dots"),
+])
+def test_replay_bad_input_is_one_line_and_leaves_no_output(trace_file, tmp_path, capsys, args, message):
+    out = tmp_path / "never"
+    assert main(["replay", str(trace_file), *args, "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+    assert not out.exists()
+
+
+def test_replay_rejects_a_packing_run_it_cannot_do(tmp_path, capsys):
+    t = make_trace([0, 1], [0, 0], [0.2, 0.3], rgba=[[1, 0, 0, 0.3], [0, 1, 0, 0.6]])
+    save_trace(t, tmp_path / "a.npz")
+    assert main(["replay", str(tmp_path / "a.npz"), "--scheme", "freepipe-mdts", "--param", "packing=true"]) == 2
+    assert "--param alpha=" in capsys.readouterr().err
+
+
+def test_schemes_lists_parameters_with_units(capsys):
+    assert main(["schemes", "freepipe-mdts"]) == 0
+    out = capsys.readouterr().out
+    assert "layers = 20 [entries/pixel]" in out
+    assert main(["schemes", "--json"]) == 0
+    table = json.loads(capsys.readouterr().out)
+    assert "kbuffer" in table and table["kbuffer"]["params"][0]["name"] == "k"
+    assert main(["schemes", "nope"]) == 2
+
+
+def test_replay_is_deterministic(trace_file, capsys):
+    runs = []
+    for _ in range(2):
+        main(["replay", str(trace_file), "--scheme", "linked-list", "--json"])
+        rec = json.loads(capsys.readouterr().out)
+        rec.pop("wall_seconds")
+        runs.append(rec)
+    assert runs[0] == runs[1]
+    assert np.isfinite(runs[0]["error"]["rmse"])
