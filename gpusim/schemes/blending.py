@@ -117,8 +117,8 @@ class AlphaBlend(Scheme):
         image = fold(pix, order, colour, step)
         struct = [Structure("framebuffer", cb, P, g.covered, f"{self.framebuffer_format} colour")]
         if prepass:
-            struct.insert(0, Structure("depth_buffer", DEPTH_BYTES, P,
-                                       len(np.unique(pix[trace.opaque])), "opaque depth (pre-pass)"))
+            opaque_px = int(np.count_nonzero(np.bincount(pix[trace.opaque], minlength=P)))
+            struct.insert(0, Structure("depth_buffer", DEPTH_BYTES, P, opaque_px, "opaque depth (pre-pass)"))
         return SchemeResult(self.name, self.params(), image.reshape(trace.height, trace.width, 3), n, g.covered,
                             struct, plan, geometry_passes=1, dropped_fragments=0, overflowed_pixels=0,
                             stats={"culled_fragments": Stat(culled, "fragments",
@@ -193,7 +193,7 @@ class WeightedBlendedOIT(Scheme):
         b_idx = np.flatnonzero(blended)
         plan.add(tp, "blend", "accumulation", b_idx, 1, lambda i, s: pix[b_idx[i]] * ab, ab, dep=prepass)
         plan.add(tp, "blend", "revealage", b_idx, 1, lambda i, s: pix[b_idx[i]] * rb, rb, dep=prepass)
-        pixels = np.arange(P)
+        pixels = P
         plan.add(tp + 1, "load", "accumulation", pixels, 1, lambda i, s: i * ab, ab)
         plan.add(tp + 1, "load", "revealage", pixels, 1, lambda i, s: i * rb, rb)
         if prepass:
@@ -225,7 +225,7 @@ class WeightedBlendedOIT(Scheme):
         struct = [Structure("accumulation", ab, P, g.covered, f"{self.accum_format} sum of w*a*c and w*a"),
                   Structure("revealage", rb, P, g.covered, f"{self.revealage_format} product of (1 - a)")]
         if prepass:
-            opaque_px = len(np.unique(pix[trace.opaque]))
+            opaque_px = int(np.count_nonzero(np.bincount(pix[trace.opaque], minlength=P)))
             struct[:0] = [Structure("depth_buffer", DEPTH_BYTES, P, opaque_px, "opaque depth (pre-pass)"),
                           Structure("framebuffer", 4, P, opaque_px, "rgba8 opaque colour")]
         return SchemeResult(self.name, self.params(), image.reshape(trace.height, trace.width, 3), n, g.covered,

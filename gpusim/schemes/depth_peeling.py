@@ -82,7 +82,7 @@ class DepthPeeling(Scheme):
         passes = passes or [Pass("peel 0", "geometry", "fragment")]
         cb = COLOUR_BYTES[self.colour_format]
         plan = OpPlan(passes, ["depth_buffer", "peel_depth", "layer_colour", "accumulation"])
-        frags, pixels = np.arange(n), np.arange(P)
+        frags, pixels = n, P
         at = lambda size: (lambda i, s: pix[i] * size)  # noqa: E731
         plan.add(0, "load", "peel_depth", frags, max(total - 1, 0), at(DEPTH_BYTES), DEPTH_BYTES,
                  pass_fn=lambda i, s: 2 * (s + 1))
@@ -133,7 +133,7 @@ class DualDepthPeeling(Scheme):
         passes.append(Pass("final", "fullscreen", "pixel"))
         cb, mm = COLOUR_BYTES[self.colour_format], 2 * DEPTH_BYTES
         plan = OpPlan(passes, ["minmax_depth", "front_colour", "back_colour"])
-        frags, pixels = np.arange(n), np.arange(P)
+        frags, pixels = n, P
         # two ping-pong min/max textures: pass k reads texture (k-1) % 2 and writes k % 2
         tex = lambda i, s, k: ((k % 2) * P + pix[i]) * mm  # noqa: E731
         plan.add(0, "blend", "minmax_depth", frags, 1, lambda i, s: tex(i, s, 0), mm)

@@ -54,8 +54,8 @@ def packed_depth(z: np.ndarray) -> np.ndarray:
 
 def colour24(rgb: np.ndarray) -> np.ndarray:
     """RGB in [0, 1] -> 24-bit 0xRRGGBB with round-to-nearest 8-bit channels (uint32)."""
-    c8 = np.rint(np.asarray(rgb, dtype=np.float64) * 255.0).astype(np.uint32)
-    return (c8[:, 0] << 16) | (c8[:, 1] << 8) | c8[:, 2]
+    c8 = np.rint(np.asarray(rgb, dtype=np.float32) * np.float32(255.0)).astype(np.uint32)
+    return (c8[:, 0] << np.uint32(16)) | (c8[:, 1] << np.uint32(8)) | c8[:, 2]
 
 
 def colour24_rgb(c24: np.ndarray) -> np.ndarray:

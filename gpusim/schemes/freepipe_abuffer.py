@@ -58,9 +58,9 @@ class FreePipeABuffer(Scheme):
         structures = ["counter", "depth_array", "colour_array"]
         plan = OpPlan(passes, structures)
         pix, arrival, layout = g.pix, g.arrival, self.layout
-        pixels = np.arange(P)
+        pixels = P
         plan.add(0, "store", "counter", pixels, 1, lambda i, s: i * POINTER_BYTES, POINTER_BYTES)
-        frags = np.arange(n)
+        frags = n
         plan.add(1, "atomic_inc", "counter", frags, 1, lambda i, s: pix[i] * POINTER_BYTES, POINTER_BYTES)
         slot = lambda i, s: entry_index(pix[kept_idx[i]], arrival[kept_idx[i]], L, P, layout)  # noqa: E731
         plan.add(1, "store", "depth_array", kept_idx, 1, lambda i, s: slot(i, s) * DEPTH_BYTES, DEPTH_BYTES, dep=True)

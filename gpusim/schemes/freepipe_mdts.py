@@ -84,18 +84,20 @@ class FreePipeMDTS(Scheme):
         resolve_pass = len(passes) - 1
         structures = ["depth_array", "colour_array"]
         plan = OpPlan(passes, structures)
-        entries = np.arange(P * L)
+        entries = P * L
         plan.add(0, "store", "depth_array", entries, 1, lambda i, s: i * DEPTH_BYTES, DEPTH_BYTES)
         plan.add(0, "store", "colour_array", entries, 1, lambda i, s: i * cb, cb)
 
         kept: dict[str, np.ndarray] = {}
-        frags = np.arange(n)
+        frags = n
         for name, value in values.items():
             storable = value != empty
             sort_value = value if self.direction == "min" else np.uint32(0xFFFFFFFF) - value
-            kept[name] = smallest_per_pixel(pix, sort_value, L, np.flatnonzero(storable))
+            every = bool(storable.all())
+            kept[name] = smallest_per_pixel(pix, sort_value, L, None if every else np.flatnonzero(storable))
             # a chain ends at the first empty entry: one atomic per entry filled before it + 1, at most L
-            filled_before = np.minimum(count_before_in_pixel(pix, g.by_arrival, storable), L)
+            before = g.arrival if every else count_before_in_pixel(pix, g.by_arrival, storable)
+            filled_before = np.minimum(before, L)
             chain = np.minimum(filled_before + 1, L)
             size = DEPTH_BYTES if name == "depth_array" else cb
             plan.add(1, atomic, name, frags, chain,
@@ -105,12 +107,12 @@ class FreePipeMDTS(Scheme):
         kept_n = np.bincount(pix[kd], minlength=P)
         stats: dict[str, Stat] = {}
         if self.packing:
-            order, rgba, stats = self._resolve_packed(trace, g, values, kept, alpha)
+            order, rgba, stats = self._resolve_packed(trace, g, values, kept, alpha, hi_lo)
         else:
             order, rgba, stats = self._colour_pass(trace, g, plan, kd)
         res = lambda i, s: entry_index(i, s, L, P, layout)  # noqa: E731
         sentinel = kept_n + (kept_n < L)          # the load that finds the first empty entry ends the walk
-        pixels = np.arange(P)
+        pixels = P
         plan.add(resolve_pass, "load", "depth_array", pixels, sentinel,
                  lambda i, s: res(i, s) * DEPTH_BYTES, DEPTH_BYTES)
         plan.add(resolve_pass, "load", "colour_array", pixels, kept_n, lambda i, s: res(i, s) * cb, cb)
@@ -176,7 +178,7 @@ class FreePipeMDTS(Scheme):
                               f"trace's alpha ranges {lo:g}..{hi:g} (opaque = 1); pass --param alpha=VALUE to use one")
         return lo
 
-    def _resolve_packed(self, trace, g, values, kept, alpha):
+    def _resolve_packed(self, trace, g, values, kept, alpha, true24):
         kd, kc = kept["depth_array"], kept["colour_array"]
         # the resolve reads entry i of both arrays; use the slots both arrays filled
         both = np.minimum(np.bincount(g.pix[kd], minlength=trace.pixel_count),
@@ -189,7 +191,7 @@ class FreePipeMDTS(Scheme):
         rgba = np.empty((len(kd), 4), np.float32)
         rgba[:, :3] = colour24_rgb(c24)
         rgba[:, 3] = alpha
-        true24 = colour24(trace.rgba[kd, :3])
+        true24 = true24[kd]
         z = trace.z[kd]
         same_pixel = pd_[1:] == pd_[:-1]
         step = np.diff(z) if self.direction == "min" else -np.diff(z)

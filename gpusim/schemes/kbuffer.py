@@ -84,11 +84,11 @@ class KBuffer(Scheme):
         resolve = len(passes) - 1
         structures = ["kbuffer"] + (["framebuffer"] if blend else [])
         plan = OpPlan(passes, structures)
-        plan.add(0, "store", "kbuffer", np.arange(P * k), 1, lambda i, s: i * entry_bytes, entry_bytes)
+        plan.add(0, "store", "kbuffer", P * k, 1, lambda i, s: i * entry_bytes, entry_bytes)
         if blend:
-            plan.add(0, "store", "framebuffer", np.arange(P), 1, lambda i, s: i * FRAMEBUFFER_BYTES,
+            plan.add(0, "store", "framebuffer", P, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES)
-        frags = np.arange(n)
+        frags = n
         at = lambda i, s: entry_index(pix[i], s, k, P, "layer-major") * entry_bytes  # noqa: E731  (k MRT planes)
         plan.add(frag_pass, "rmw_read", "kbuffer", frags, k, at, entry_bytes)
         if blend:
@@ -97,7 +97,7 @@ class KBuffer(Scheme):
         plan.add(frag_pass, "rmw_write", "kbuffer", frags, k, at, entry_bytes, dep=True)
         if blend:
             plan.add(frag_pass, "rmw_write", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES, dep=True)
-        pixels = np.arange(P)
+        pixels = P
         plan.add(resolve, "load", "kbuffer", pixels, k,
                  lambda i, s: entry_index(i, s, k, P, "layer-major") * entry_bytes, entry_bytes)
         if blend:

@@ -96,7 +96,7 @@ class LinkedList(Scheme):
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
                   Pass("resolve", "fullscreen", "pixel")]
         plan = OpPlan(passes, ["head", "nodes", "counter"])
-        pixels, frags = np.arange(P), np.arange(n)
+        pixels, frags = P, n
         plan.add(0, "store", "head", pixels, 1, lambda i, s: i * POINTER_BYTES, POINTER_BYTES)
         plan.add(0, "store", "counter", np.zeros(1, np.int64), 1, lambda i, s: i * 0, POINTER_BYTES)
         plan.add(1, "atomic_inc", "counter", frags, 1, lambda i, s: i * 0, POINTER_BYTES)

@@ -83,6 +83,9 @@ class OpGroup:
     def total(self) -> int:
         return int(self.count.sum())
 
+    def threads(self) -> np.ndarray:
+        return self.thread
+
 
 @dataclass
 class OpPlan:
@@ -104,8 +107,11 @@ class OpPlan:
             raise ValueError(f"unknown operation {op!r}")
         if structure not in self.structures:
             raise ValueError(f"operation on unallocated structure {structure!r}")
-        thread = np.asarray(thread, dtype=np.int64)
-        count = np.broadcast_to(np.asarray(count, dtype=np.int64), thread.shape)
+        if isinstance(thread, (int, np.integer)):       # threads 0..thread-1, made only on expansion
+            thread = _Range(int(thread))
+        else:
+            thread = np.asarray(thread, dtype=np.int64)
+        count = np.broadcast_to(np.asarray(count, dtype=np.int64), (len(thread),))
         if not np.isscalar(pass_index):
             pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), thread.shape)
         if len(thread) and not (0 <= np.min(pass_index) and np.max(pass_index) < len(self.passes)):
@@ -134,6 +140,7 @@ class OpPlan:
                                                   "bytes", "dep")}
         for g in self.groups:
             n = g.total
+            thread = np.arange(len(g.thread)) if isinstance(g.thread, _Range) else g.thread
             i = np.repeat(np.arange(len(g.thread)), g.count)
             first = np.cumsum(g.count) - g.count
             seq = np.arange(n, dtype=np.int64) - np.repeat(first, g.count)
@@ -144,7 +151,7 @@ class OpPlan:
                 cols["pass_index"].append(np.full(n, g.pass_index, np.uint32))
             else:
                 cols["pass_index"].append(g.pass_index[i].astype(np.uint32))
-            cols["thread"].append(g.thread[i])
+            cols["thread"].append(thread[i])
             cols["op"].append(np.full(n, OPS.index(g.op), np.uint8))
             cols["structure"].append(np.full(n, self.structures.index(g.structure), np.uint8))
             cols["address"].append(offset + np.uint64(bases[g.structure]))
@@ -156,6 +163,20 @@ class OpPlan:
         arrays = {k: v[order] for k, v in arrays.items()}
         return OpStream(**arrays, passes=list(self.passes), structures=list(self.structures),
                         bases=dict(bases))
+
+
+class _Range:
+    """Threads 0..n-1 without materialising them (a clear pass over millions of entries)."""
+
+    def __init__(self, n: int):
+        self.n = n
+
+    def __len__(self) -> int:
+        return self.n
+
+    @property
+    def shape(self):
+        return (self.n,)
 
 
 _EMPTY_DTYPES = {"pass_index": np.uint32, "thread": np.int64, "op": np.uint8, "structure": np.uint8,

@@ -56,8 +56,8 @@ class StencilRoutedABuffer(Scheme):
             passes.append(Pass("overflow", "geometry", "fragment"))
         passes.append(Pass("resolve", "fullscreen", "pixel"))
         plan = OpPlan(passes, ["stencil", "samples"])
-        plan.add(0, "store", "stencil", np.arange(P * k), 1, lambda i, s: i * STENCIL_BYTES, STENCIL_BYTES)
-        frags = np.arange(n)
+        plan.add(0, "store", "stencil", P * k, 1, lambda i, s: i * STENCIL_BYTES, STENCIL_BYTES)
+        frags = n
         sample_at = lambda p, s: entry_index(p, s, k, P, "pixel-major")  # noqa: E731  (samples of a pixel adjacent)
         plan.add(1, "stencil", "stencil", frags, k, lambda i, s: sample_at(pix[i], s) * STENCIL_BYTES, STENCIL_BYTES)
         kept_idx = np.flatnonzero(g.arrival < k)
@@ -67,7 +67,7 @@ class StencilRoutedABuffer(Scheme):
             plan.add(2, "stencil", "stencil", frags, 1, lambda i, s: sample_at(pix[i], k - 1) * STENCIL_BYTES,
                      STENCIL_BYTES)
         kept_n = np.minimum(g.count, k)
-        plan.add(len(passes) - 1, "load", "samples", np.arange(P), kept_n, lambda i, s: sample_at(i, s) * sb, sb)
+        plan.add(len(passes) - 1, "load", "samples", P, kept_n, lambda i, s: sample_at(i, s) * sb, sb)
 
         loaded = g.by_arrival[g.arrival[g.by_arrival] < k]
         perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)
