@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up gpusim and run the main job on the bundled default scene:
-# rasterize it into traces/default.npz, summarise it, and write reports/default/*.png.
+# rasterize it into traces/default.npz, summarise it, write reports/default/*.png, and
+# replay it through FreePipe's A-buffer scheme (reports/default/freepipe-abuffer/).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 [ -x .venv/bin/python ] || python3 -m venv .venv
@@ -8,3 +9,4 @@ cd "$(dirname "$0")/.."
 .venv/bin/gpusim trace default -o traces/default.npz
 .venv/bin/gpusim info traces/default.npz
 .venv/bin/gpusim show traces/default.npz -o reports/default
+.venv/bin/gpusim replay traces/default.npz --scheme freepipe-abuffer -o reports/default/freepipe-abuffer
