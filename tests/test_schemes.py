@@ -295,3 +295,14 @@ def test_thousands_of_layers_on_one_pixel_and_alpha_extremes(name):
     assert np.isfinite(res.image).all() and (res.image >= 0).all() and (res.image <= 1 + 1e-6).all()
     if name in ("freepipe-abuffer", "freepipe-mdts", "linked-list", "depth-peeling", "dual-depth-peeling"):
         assert image_error(res.image, composite_exact(t))["differing_pixels"] == 0
+
+
+def test_structures_only_where_the_scene_needs_them(random_trace):
+    transparent = random_trace.subset(~random_trace.opaque)
+    for name in ("alpha-blend", "wboit"):
+        assert "depth_buffer" in run(name, random_trace).footprint
+        res = run(name, transparent)
+        assert "depth_buffer" not in res.footprint and res.passes[0].name == "transparent"
+    assert "framebuffer" not in run("kbuffer", random_trace).footprint
+    assert "framebuffer" in run("kbuffer", random_trace, mode="sort-blend").footprint
+    assert "colour_array" in run("freepipe-mdts", random_trace).footprint

@@ -20,8 +20,8 @@ equations 7-10, clamps included) with view-space depth |z| and window depth d:
 |z| is recovered from window depth with the camera's near and far planes
 (from the trace's scene metadata, or the ``near`` / ``far`` parameters).
 
-Opaque fragments (``opaque = prepass``, the usual practice): a depth-tested
-pass draws the nearest opaque fragment of each pixel (first submitted on equal
+Opaque fragments (``opaque = prepass``, the usual practice; a trace without
+opaque fragments gets no pre-pass and no depth buffer): a depth-tested pass draws the nearest opaque fragment of each pixel (first submitted on equal
 depth) and fills ``depth_buffer``; transparent fragments behind it fail the
 depth test (``culled_fragments``) and the transparent result is blended over
 the opaque image. With ``opaque = blend`` opaque fragments are blended like
@@ -92,7 +92,7 @@ class AlphaBlend(Scheme):
         n, P, pix = len(trace), trace.pixel_count, g.pix
         cb = COLOUR_BYTES[self.framebuffer_format]
         rnd = rounder(self.framebuffer_format)
-        prepass = self.opaque == "prepass"
+        prepass = self.opaque == "prepass" and bool(trace.opaque.any())   # no opaque: nothing to pre-pass
         passes = ([Pass("opaque", "geometry", "fragment")] if prepass else []) + \
             [Pass("transparent", "geometry", "fragment")]
         plan = OpPlan(passes, (["depth_buffer"] if prepass else []) + ["framebuffer"])
@@ -177,7 +177,7 @@ class WeightedBlendedOIT(Scheme):
         n, P, pix = len(trace), trace.pixel_count, g.pix
         ab, rb = COLOUR_BYTES[self.accum_format], REVEALAGE_BYTES[self.revealage_format]
         acc_round, rev_round = rounder(self.accum_format), rounder(self.revealage_format)
-        prepass = self.opaque == "prepass"
+        prepass = self.opaque == "prepass" and bool(trace.opaque.any())   # no opaque: nothing to pre-pass
         passes = ([Pass("opaque", "geometry", "fragment")] if prepass else []) + \
             [Pass("transparent", "geometry", "fragment"), Pass("composite", "fullscreen", "pixel")]
         plan = OpPlan(passes, (["depth_buffer", "framebuffer"] if prepass else []) + ["accumulation", "revealage"])
