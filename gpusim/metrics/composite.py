@@ -23,6 +23,21 @@ def run_starts(pix_sorted: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.r_[True, pix_sorted[1:] != pix_sorted[:-1]])
 
 
+def runs_by_length(pix_sorted: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Runs of a grouped pixel-id array, longest first: (start, length, active).
+
+    ``active[k]`` is the number of runs longer than k, so at rank k the runs
+    ``0 .. active[k] - 1`` (a prefix) still have an element: ``start[:active[k]] + k``.
+    Equal lengths keep ascending run order. ``pix_sorted`` must be non-empty.
+    """
+    start = run_starts(pix_sorted)
+    length = np.diff(np.r_[start, len(pix_sorted)])
+    by_length = np.argsort(-length, kind="stable")
+    start, length = start[by_length], length[by_length]
+    active = np.searchsorted(-length, -(np.arange(length[0]) + 1), side="right")
+    return start, length, active
+
+
 def composite_runs(pix: np.ndarray, rgb: np.ndarray, alpha: np.ndarray, pixel_count: int,
                    background, dtype=np.float64) -> np.ndarray:
     """Composite grouped runs front to back; returns (pixel_count, 3) in ``dtype``.
@@ -39,13 +54,8 @@ def composite_runs(pix: np.ndarray, rgb: np.ndarray, alpha: np.ndarray, pixel_co
         return image
     alpha = np.asarray(alpha, dtype=dtype)
     weighted = np.asarray(rgb, dtype=dtype) * alpha[:, None]
-    start = run_starts(pix)
+    start, _, active = runs_by_length(pix)
     covered = pix[start]
-    count = np.diff(np.r_[start, len(pix)])
-    by_count = np.argsort(-count, kind="stable")
-    covered, start, count = covered[by_count], start[by_count], count[by_count]
-    # active[k] = number of pixels with more than k fragments (a prefix: counts descend)
-    active = np.searchsorted(-count, -(np.arange(count[0]) + 1), side="right")
     trans = np.ones(len(covered), dtype=dtype)
     colour = np.zeros((len(covered), 3), dtype=dtype)
     for k, m in enumerate(active):

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.metrics.composite import run_starts
+from gpusim.metrics.composite import runs_by_length
 
 _NONE = np.iinfo(np.int64).max
 
@@ -29,11 +29,7 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
     if n == 0:
         return np.zeros(0, np.int64)
     pix_sorted = pix[by_arrival]
-    start = run_starts(pix_sorted)
-    count = np.diff(np.r_[start, n])
-    by_count = np.argsort(-count, kind="stable")
-    start_c, count_c = start[by_count], count[by_count]
-    active = np.searchsorted(-count_c, -(np.arange(count_c[0]) + 1), side="right")
+    start_c, count_c, active = runs_by_length(pix_sorted)
     arrival_pos = np.arange(n, dtype=np.int64)          # position in by_arrival breaks ties by arrival
     # queue entries: (key << 32 | position) so argmin = nearest, then earliest; _NONE = empty slot
     queue = np.full((len(start_c), capacity + 1), _NONE, np.int64)

@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from gpusim.metrics.composite import run_starts
+from gpusim.metrics.composite import runs_by_length
 
 
 def fold(pix: np.ndarray, by_arrival: np.ndarray, state: np.ndarray,
@@ -22,12 +22,8 @@ def fold(pix: np.ndarray, by_arrival: np.ndarray, state: np.ndarray,
     if len(by_arrival) == 0:
         return state
     pix_sorted = pix[by_arrival]
-    start = run_starts(pix_sorted)
-    count = np.diff(np.r_[start, len(by_arrival)])
-    by_count = np.argsort(-count, kind="stable")
-    start, count = start[by_count], count[by_count]
+    start, _, active = runs_by_length(pix_sorted)
     covered = pix_sorted[start]
-    active = np.searchsorted(-count, -(np.arange(count[0]) + 1), side="right")
     for j, m in enumerate(active):
         rows = covered[:m]
         state[rows] = step(state[rows], by_arrival[start[:m] + j])
