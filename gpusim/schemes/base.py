@@ -18,6 +18,7 @@ from gpusim.config import build, describe, to_dict
 from gpusim.errors import ConfigError
 from gpusim.metrics.composite import composite_runs
 from gpusim.schemes.result import SchemeResult
+from gpusim.schemes.storage import effective_alpha, store_colour
 from gpusim.trace import FragmentTrace
 
 #: name -> scheme class; filled by @register at import of gpusim.schemes.
@@ -79,3 +80,13 @@ def composite_image(trace: FragmentTrace, pix: np.ndarray, rgba: np.ndarray, alp
     """(H, W, 3) image from grouped runs in compositing order (float32 arithmetic by default)."""
     image = composite_runs(pix, rgba[:, :3], alpha, trace.pixel_count, trace.background, dtype)
     return image.reshape(trace.height, trace.width, 3)
+
+
+def composite_stored(trace: FragmentTrace, pix: np.ndarray, order: np.ndarray, colour_format: str) -> np.ndarray:
+    """Image of fragments ``order`` (grouped by pixel, in compositing order) as a scheme stored them.
+
+    Colours are rounded to ``colour_format``; opaque fragments count as alpha 1.
+    ``pix`` is the pixel id of every fragment of ``trace``.
+    """
+    rgba = store_colour(trace.rgba[order], colour_format)
+    return composite_image(trace, pix[order], rgba, effective_alpha(rgba, trace.opaque[order]))

@@ -33,11 +33,11 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
-from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 
 Termination = Literal["known-layers", "occlusion-query"]
 
@@ -48,12 +48,6 @@ def _layers(g: PixelGroups) -> np.ndarray:
     if g.n:
         np.maximum.at(lay, g.pix, g.distinct_rank + 1)
     return lay
-
-
-def _image(trace, g, order, colour_format):
-    rgba = store_colour(trace.rgba[order], colour_format)
-    alpha = np.where(trace.opaque[order], np.float32(1.0), rgba[:, 3])
-    return composite_image(trace, g.pix[order], rgba, alpha)
 
 
 @register("depth-peeling")
@@ -102,7 +96,7 @@ class DepthPeeling(Scheme):
                   Structure("peel_depth", DEPTH_BYTES, P, g.covered, "depth peeled by the previous pass"),
                   Structure("layer_colour", cb, P, g.covered, f"{self.colour_format} colour of the peeled layer"),
                   Structure("accumulation", cb, P, g.covered, "front-to-back accumulated colour")]
-        return SchemeResult(self.name, self.params(), _image(trace, g, order, self.colour_format), n, g.covered,
+        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n, g.covered,
                             struct, plan, geometry_passes=total, dropped_fragments=int(n - len(order)),
                             overflowed_pixels=int(np.count_nonzero(lay > peels)),
                             lists=CapturedLists(pix[order], order),
@@ -160,7 +154,7 @@ class DualDepthPeeling(Scheme):
         struct = [Structure("minmax_depth", mm, 2 * P, 2 * g.covered, "two ping-pong RG32F (-min, max) textures"),
                   Structure("front_colour", cb, P, g.covered, "front-to-back accumulated colour"),
                   Structure("back_colour", cb, P, g.covered, "back-to-front accumulated colour")]
-        return SchemeResult(self.name, self.params(), _image(trace, g, order, self.colour_format), n, g.covered,
+        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n, g.covered,
                             struct, plan, geometry_passes=1 + peels, dropped_fragments=int(n - len(order)),
                             overflowed_pixels=int(np.count_nonzero(-(-lay // 2) > peels)),
                             lists=CapturedLists(pix[order], order),

@@ -27,12 +27,12 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.schemes.arrays import Layout, entry_index
-from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 from gpusim.schemes.sorting import sort_runs
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat, store_colour
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat
 
 
 @register("freepipe-abuffer")
@@ -74,9 +74,7 @@ class FreePipeABuffer(Scheme):
         loaded = g.by_arrival[kept[g.by_arrival]]
         perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)
         order = loaded[perm]
-        rgba = store_colour(trace.rgba[order], self.colour_format)
-        alpha = np.where(trace.opaque[order], np.float32(1.0), rgba[:, 3])
-        image = composite_image(trace, pix[order], rgba, alpha)
+        image = composite_stored(trace, pix, order, self.colour_format)
 
         covered = g.covered
         struct = [

@@ -36,13 +36,13 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.schemes.arrays import entry_index, smallest_per_pixel
-from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.depth_filter import emit_order
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.reorder import batch_index, centroid_order, permuted
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 
 FRAMEBUFFER_BYTES = 16   # RGBA32F off-screen framebuffer (one MRT attachment)
 
@@ -117,9 +117,7 @@ class KBuffer(Scheme):
             order = smallest_per_pixel(pix, g.key, k)
             kept_count = len(order)
             used = kept_count
-        rgba = store_colour(t.rgba[order], self.colour_format)
-        alpha = np.where(t.opaque[order], np.float32(1.0), rgba[:, 3])
-        image = composite_image(t, pix[order], rgba, alpha)
+        image = composite_stored(t, pix, order, self.colour_format)
         struct = [Structure("kbuffer", entry_bytes, P * k, used, f"k entries of depth + {self.colour_format} colour")]
         if blend:
             struct.append(Structure("framebuffer", FRAMEBUFFER_BYTES, P, g.covered, "RGBA32F blend target (MRT)"))

@@ -29,12 +29,12 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
-from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 from gpusim.schemes.sorting import sort_runs
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat, store_colour
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat
 
 NIL = -1
 
@@ -115,15 +115,13 @@ class LinkedList(Scheme):
         loaded = w_node[keep]                              # walk order: most recent first
         perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)
         order = loaded[perm]
-        rgba = store_colour(trace.rgba[order], self.colour_format)
-        alpha = np.where(trace.opaque[order], np.float32(1.0), rgba[:, 3])
         overflow = n - len(alloc_idx)
         struct = [Structure("head", POINTER_BYTES, P, g.covered, "head node index per pixel"),
                   Structure("nodes", node_bytes, pool, len(alloc_idx),
                             f"node: {self.colour_format} colour, depth, next index"),
                   Structure("counter", POINTER_BYTES, 1, 1 if n else 0, "global node allocation counter")]
         lost = np.bincount(pix, minlength=P) > np.bincount(pix[order], minlength=P)
-        return SchemeResult(self.name, self.params(), composite_image(trace, pix[order], rgba, alpha), n,
+        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n,
                             g.covered, struct, plan, geometry_passes=1,
                             dropped_fragments=int(n - len(order)), overflowed_pixels=int(lost.sum()),
                             lists=CapturedLists(pix[order], order),

@@ -27,12 +27,12 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.schemes.arrays import entry_index
-from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 from gpusim.schemes.sorting import sort_runs
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 
 STENCIL_BYTES = 1
 
@@ -72,12 +72,10 @@ class StencilRoutedABuffer(Scheme):
         loaded = g.by_arrival[g.arrival[g.by_arrival] < k]
         perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)
         order = loaded[perm]
-        rgba = store_colour(trace.rgba[order], self.colour_format)
-        alpha = np.where(trace.opaque[order], np.float32(1.0), rgba[:, 3])
         struct = [Structure("stencil", STENCIL_BYTES, P * k, int(g.covered * k), "routing stencil per sample"),
                   Structure("samples", sb, P * k, len(kept_idx), f"depth + {self.colour_format} colour per sample")]
         over = g.count > k
-        return SchemeResult(self.name, self.params(), composite_image(trace, pix[order], rgba, alpha), n, g.covered,
+        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n, g.covered,
                             struct, plan, geometry_passes=2 if self.overflow_pass else 1,
                             dropped_fragments=int(n - len(kept_idx)), overflowed_pixels=int(over.sum()),
                             lists=CapturedLists(pix[order], order),
