@@ -38,19 +38,19 @@ import numpy as np
 from gpusim.config import param
 from gpusim.errors import GpusimError
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.fold import fold, rounder
+from gpusim.schemes.fold import fold
 from gpusim.schemes.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import SchemeResult, Stat, Structure
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES
+from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, rounder
 
 OpaqueMode = Literal["prepass", "blend"]
 REVEALAGE_BYTES = {"r8": 1, "r16f": 2, "r32f": 4}
 
 
 def _opaque_prepass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colour_bytes: int,
-                    colour_round) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """Depth-tested opaque pass: (colour image (P,3), transparent mask, depth test passes, culled)."""
+                    colour_round) -> tuple[np.ndarray, np.ndarray, int]:
+    """Depth-tested opaque pass: (colour image (P, 3), mask of transparent fragments it lets through, culled)."""
     P = trace.pixel_count
     opaque = trace.opaque
     op_idx = np.flatnonzero(opaque)
@@ -76,7 +76,7 @@ def _opaque_prepass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colour
              colour_bytes, dep=True)
     transparent = ~opaque & (g.key < zbuf[pix])
     culled = int(np.count_nonzero(~opaque & ~transparent))
-    return colour, transparent, zbuf, culled
+    return colour, transparent, culled
 
 
 @register("alpha-blend")
@@ -97,7 +97,7 @@ class AlphaBlend(Scheme):
             [Pass("transparent", "geometry", "fragment")]
         plan = OpPlan(passes, (["depth_buffer"] if prepass else []) + ["framebuffer"])
         if prepass:
-            colour, blended, _, culled = _opaque_prepass(trace, g, plan, 0, cb, rnd)
+            colour, blended, culled = _opaque_prepass(trace, g, plan, 0, cb, rnd)
             t_idx = np.flatnonzero(~trace.opaque)
             plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
         else:
@@ -182,7 +182,7 @@ class WeightedBlendedOIT(Scheme):
             [Pass("transparent", "geometry", "fragment"), Pass("composite", "fullscreen", "pixel")]
         plan = OpPlan(passes, (["depth_buffer", "framebuffer"] if prepass else []) + ["accumulation", "revealage"])
         if prepass:
-            base, blended, _, culled = _opaque_prepass(trace, g, plan, 0, 4, rounder("rgba8"))
+            base, blended, culled = _opaque_prepass(trace, g, plan, 0, 4, rounder("rgba8"))
             t_idx = np.flatnonzero(~trace.opaque)
             plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
         else:

@@ -29,16 +29,3 @@ def fold(pix: np.ndarray, by_arrival: np.ndarray, state: np.ndarray,
         state[rows] = step(state[rows], by_arrival[start[:m] + j])
     return state
 
-
-def rounder(fmt: str) -> Callable[[np.ndarray], np.ndarray]:
-    """Round float32 values to what a render target of format ``fmt`` stores."""
-    if fmt in ("rgba8", "r8"):
-        return lambda v: (np.rint(np.clip(v, 0, 1) * np.float32(255.0)) / np.float32(255.0)).astype(np.float32)
-    if fmt in ("rgba16f", "r16f"):
-        def half(v):
-            with np.errstate(over="ignore"):        # past 65504 a half target holds +inf, as hardware does
-                return v.astype(np.float16).astype(np.float32)
-        return half
-    if fmt in ("rgba32f", "r32f"):
-        return lambda v: v.astype(np.float32)
-    raise ValueError(f"unknown render-target format {fmt!r}")

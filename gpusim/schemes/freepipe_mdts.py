@@ -125,8 +125,9 @@ class FreePipeMDTS(Scheme):
                   Structure("colour_array", cb, P * L, len(kept["colour_array"]) if self.packing else len(kd),
                             "20-bit depth + 12 colour bits per entry" if self.packing
                             else f"{self.colour_format} colour per entry (second pass)")]
-        atomics = int(plan.accesses().get("depth_array", {}).get(atomic, 0))
-        stats["atomic_operations"] = Stat(sum(v.get(atomic, 0) for v in plan.accesses().values()), "operations",
+        accesses = plan.accesses()
+        atomics = int(accesses.get("depth_array", {}).get(atomic, 0))
+        stats["atomic_operations"] = Stat(sum(v.get(atomic, 0) for v in accesses.values()), "operations",
                                           f"{atomic} operations in the capture pass (all arrays)")
         stats["depth_chain_atomics"] = Stat(atomics, "operations", f"{atomic} operations on depth_array")
         return SchemeResult(self.name, self.params(), image, n, g.covered, struct, plan,
@@ -150,7 +151,7 @@ class FreePipeMDTS(Scheme):
         # loads: walk until own value (slot + 1 loads) or to the end of the array (L loads)
         slot = np.where(found, slot_of_kept[np.maximum(entry, 0)] if len(kd) else 0, L - 1)
         layout = self.layout
-        plan.add(2, "load", "depth_array", np.arange(n), slot + 1,
+        plan.add(2, "load", "depth_array", n, slot + 1,
                  lambda i, s: entry_index(pix[i], s, L, P, layout) * DEPTH_BYTES, DEPTH_BYTES)
         writers = np.flatnonzero(found)
         plan.add(2, "store", "colour_array", writers, 1,

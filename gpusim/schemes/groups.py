@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from gpusim.metrics.composite import run_starts
+from gpusim.schemes.arrays import rank_in_runs
 from gpusim.schemes.depthkey import depth_key
 from gpusim.schemes.storage import effective_alpha
 from gpusim.trace import FragmentTrace
@@ -65,11 +65,6 @@ class PixelGroups:
         return np.argsort(combined, kind="stable")
 
     @cached_property
-    def depth_rank(self) -> np.ndarray:
-        """0-based position of each fragment in its pixel's depth order."""
-        return self._rank_in_runs(self.by_depth)
-
-    @cached_property
     def distinct_rank(self) -> np.ndarray:
         """0-based rank of each fragment's depth among the distinct depths of its pixel."""
         order = self.by_depth
@@ -84,11 +79,8 @@ class PixelGroups:
         return rank
 
     def _rank_in_runs(self, order: np.ndarray) -> np.ndarray:
-        pix = self.pix[order]
-        start = run_starts(pix)
-        lengths = np.diff(np.r_[start, len(order)])
         rank = np.empty(self.n, np.int64)
-        rank[order] = np.arange(self.n) - np.repeat(start, lengths)
+        rank[order] = rank_in_runs(self.pix[order])
         return rank
 
 

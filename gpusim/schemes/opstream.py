@@ -83,9 +83,6 @@ class OpGroup:
     def total(self) -> int:
         return int(self.count.sum())
 
-    def threads(self) -> np.ndarray:
-        return self.thread
-
 
 @dataclass
 class OpPlan:
@@ -113,7 +110,7 @@ class OpPlan:
             thread = np.asarray(thread, dtype=np.int64)
         count = np.broadcast_to(np.asarray(count, dtype=np.int64), (len(thread),))
         if not np.isscalar(pass_index):
-            pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), thread.shape)
+            pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), (len(thread),))
         if len(thread) and not (0 <= np.min(pass_index) and np.max(pass_index) < len(self.passes)):
             raise ValueError(f"pass index out of range 0..{len(self.passes) - 1}")
         if len(thread) and int(count.sum()) > 0:
@@ -173,10 +170,6 @@ class _Range:
 
     def __len__(self) -> int:
         return self.n
-
-    @property
-    def shape(self):
-        return (self.n,)
 
 
 _EMPTY_DTYPES = {"pass_index": np.uint32, "thread": np.int64, "op": np.uint8, "structure": np.uint8,

@@ -14,7 +14,7 @@ rgba32f   16     single-precision channels (the trace's own precision: exact)
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Callable, Literal
 
 import numpy as np
 
@@ -24,16 +24,30 @@ DEPTH_BYTES = 4   # 32-bit depth (float or ordered integer key)
 POINTER_BYTES = 4  # 32-bit node index / counter
 
 
+def rounder(fmt: str) -> Callable[[np.ndarray], np.ndarray]:
+    """Round float32 values to what a texel or render target of format ``fmt`` holds.
+
+    8-bit unorm formats (rgba8, r8) clamp to [0, 1] and round to the nearest
+    1/255; half formats round to nearest even and hold +inf past 65504, as
+    hardware does; 32-bit float formats keep the value.
+    """
+    if fmt in ("rgba8", "r8"):
+        return lambda v: (np.rint(np.clip(v, 0, 1) * np.float32(255.0)) / np.float32(255.0)).astype(np.float32)
+    if fmt in ("rgba16f", "r16f"):
+        def half(v):
+            with np.errstate(over="ignore"):
+                return np.asarray(v).astype(np.float16).astype(np.float32)
+        return half
+    if fmt in ("rgba32f", "r32f"):
+        return lambda v: np.asarray(v, dtype=np.float32)
+    raise ValueError(f"unknown render-target format {fmt!r}")
+
+
 def store_colour(rgba: np.ndarray, fmt: str) -> np.ndarray:
     """The (N, 4) float32 colour a ``fmt`` texel gives back when read."""
-    rgba = np.asarray(rgba, dtype=np.float32)
-    if fmt == "rgba32f":
-        return rgba
-    if fmt == "rgba16f":
-        return rgba.astype(np.float16).astype(np.float32)
-    if fmt == "rgba8":
-        return (np.rint(rgba * np.float32(255.0)) / np.float32(255.0)).astype(np.float32)
-    raise ValueError(f"unknown colour format {fmt!r} (valid: {', '.join(COLOUR_BYTES)})")
+    if fmt not in COLOUR_BYTES:
+        raise ValueError(f"unknown colour format {fmt!r} (valid: {', '.join(COLOUR_BYTES)})")
+    return rounder(fmt)(np.asarray(rgba, dtype=np.float32))
 
 
 def effective_alpha(rgba: np.ndarray, opaque: np.ndarray) -> np.ndarray:
