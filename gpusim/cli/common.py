@@ -22,19 +22,19 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _jsonable(value):
+def jsonable(value):
     if isinstance(value, float) and not math.isfinite(value):
         return None if math.isnan(value) else ("inf" if value > 0 else "-inf")
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     return value
 
 
 def print_json(obj) -> None:
     """One JSON object on stdout; infinities become the strings "inf"/"-inf"."""
-    json.dump(_jsonable(obj), sys.stdout, indent=2, sort_keys=False)
+    json.dump(jsonable(obj), sys.stdout, indent=2, sort_keys=False)
     sys.stdout.write("\n")
 
 

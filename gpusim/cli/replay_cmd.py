@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from gpusim.atomic_io import write_text_atomic
-from gpusim.cli.common import _jsonable, print_json
+from gpusim.cli.common import jsonable, print_json
 from gpusim.replay import parse_params, replay
 from gpusim.schemes import scheme_names
 from gpusim.trace_io import load_trace
@@ -73,4 +73,4 @@ def _write_outputs(out: Path, record: dict, image, reference) -> None:
     save_image_png(image, out / "image.png")
     save_heatmap_png(diff, out / "difference.png", title=f"{record['scheme']}: |image - reference| (max channel)",
                      label="absolute difference")
-    write_text_atomic(out / "stats.json", json.dumps(_jsonable(record), indent=2) + "\n")
+    write_text_atomic(out / "stats.json", json.dumps(jsonable(record), indent=2) + "\n")
