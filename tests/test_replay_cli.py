@@ -81,3 +81,16 @@ def test_replay_is_deterministic(trace_file, capsys):
         runs.append(rec)
     assert runs[0] == runs[1]
     assert np.isfinite(runs[0]["error"]["rmse"])
+
+
+def test_output_piped_into_a_closed_reader_exits_quietly():
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "gpusim", "schemes"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.read(10)
+    proc.stdout.close()                      # like '| head -c 10'
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=60)
+    assert "Traceback" not in err
