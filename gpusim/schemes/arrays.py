@@ -25,6 +25,11 @@ def entry_index(pixel: np.ndarray, slot: np.ndarray, layers: int, pixel_count: i
     return slot * pixel_count + pixel
 
 
+def pixel_key(pix: np.ndarray, value: np.ndarray) -> np.ndarray:
+    """uint64 ``pix << 32 | value``: sorting it groups by pixel and orders by the 32-bit value."""
+    return (np.asarray(pix).astype(np.uint64) << np.uint64(32)) | np.asarray(value).astype(np.uint64)
+
+
 def rank_in_runs(pix_sorted: np.ndarray) -> np.ndarray:
     """0-based position of each element inside its run of a grouped array."""
     start = run_starts(pix_sorted)
@@ -39,8 +44,7 @@ def smallest_per_pixel(pix: np.ndarray, value: np.ndarray, limit: int,
     choice to those indices (others never enter the array).
     """
     idx = np.arange(len(pix)) if candidates is None else np.asarray(candidates, dtype=np.int64)
-    combined = (pix[idx].astype(np.uint64) << np.uint64(32)) | value[idx].astype(np.uint64)
-    order = idx[np.argsort(combined, kind="stable")]
+    order = idx[np.argsort(pixel_key(pix[idx], value[idx]), kind="stable")]
     return order[rank_in_runs(pix[order]) < limit]
 
 

@@ -39,7 +39,8 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.errors import GpusimError
-from gpusim.schemes.arrays import Layout, count_before_in_pixel, entry_index, rank_in_runs, smallest_per_pixel
+from gpusim.schemes.arrays import (Layout, count_before_in_pixel, entry_index, pixel_key, rank_in_runs,
+                                   smallest_per_pixel)
 from gpusim.schemes.base import Scheme, composite_image, register
 from gpusim.schemes.depthkey import EMPTY, colour24, colour24_rgb, packed_depth
 from gpusim.schemes.groups import PixelGroups
@@ -142,7 +143,7 @@ class FreePipeMDTS(Scheme):
         P, L, n, pix = trace.pixel_count, self.layers, len(trace), g.pix
         cb = COLOUR_BYTES[self.colour_format]
         slot_of_kept = rank_in_runs(pix[kd])
-        combined = (pix.astype(np.uint64) << np.uint64(32)) | g.key.astype(np.uint64)
+        combined = pixel_key(pix, g.key)
         # equal values sit next to each other in the array: the first occurrence is the lowest slot
         uniq, first = np.unique(combined[kd], return_index=True)
         pos = np.minimum(np.searchsorted(uniq, combined), max(len(uniq) - 1, 0))

@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from gpusim.schemes.arrays import rank_in_runs
+from gpusim.schemes.arrays import pixel_key, rank_in_runs
 from gpusim.schemes.depthkey import depth_key
 from gpusim.schemes.storage import effective_alpha
 from gpusim.trace import FragmentTrace
@@ -61,8 +61,7 @@ class PixelGroups:
     @cached_property
     def by_depth(self) -> np.ndarray:
         """Fragment indices grouped by pixel, nearest first, equal depths in submission order."""
-        combined = (self.pix.astype(np.uint64) << np.uint64(32)) | self.key.astype(np.uint64)
-        return np.argsort(combined, kind="stable")
+        return np.argsort(pixel_key(self.pix, self.key), kind="stable")
 
     @cached_property
     def distinct_rank(self) -> np.ndarray:
@@ -90,7 +89,7 @@ def segment_running_min_before(pix_sorted: np.ndarray, key_sorted: np.ndarray) -
     Returns uint64 with 2**32 where there is no earlier entry. Vectorised with
     one accumulate: larger pixel ids reset the running maximum of the inverted key.
     """
-    inv = (pix_sorted.astype(np.uint64) << np.uint64(32)) | (np.uint64(0xFFFFFFFF) - key_sorted.astype(np.uint64))
+    inv = pixel_key(pix_sorted, np.uint64(0xFFFFFFFF) - key_sorted.astype(np.uint64))
     run_max = np.maximum.accumulate(inv)
     prev = np.r_[np.uint64(0), run_max[:-1]]
     same = np.r_[False, pix_sorted[1:] == pix_sorted[:-1]]

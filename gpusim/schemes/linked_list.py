@@ -81,7 +81,7 @@ class LinkedList(Scheme):
         head = np.full(P, NIL, np.int64)
         nxt = np.full(len(alloc_idx), NIL, np.int64)
         if len(alloc_idx):
-            by_pix = alloc_idx[np.argsort(pix[alloc_idx], kind="stable")]
+            by_pix = g.by_arrival[allocated[g.by_arrival]]     # allocated nodes by pixel, in order
             same = np.r_[False, pix[by_pix][1:] == pix[by_pix][:-1]]
             nxt[by_pix[same]] = by_pix[np.flatnonzero(same) - 1]
             last = np.r_[pix[by_pix][1:] != pix[by_pix][:-1], True]
