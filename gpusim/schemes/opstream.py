@@ -75,7 +75,7 @@ class OpGroup:
     thread: np.ndarray
     count: np.ndarray
     offset: Callable[[np.ndarray, np.ndarray], np.ndarray]
-    bytes: int
+    bytes: int | Callable[[np.ndarray, np.ndarray], np.ndarray]   # per op (i, seq) when sizes vary
     dep: bool
     pass_fn: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None   # pass of each op (i, seq)
 
@@ -93,10 +93,12 @@ class OpPlan:
     groups: list[OpGroup] = field(default_factory=list)
 
     def add(self, pass_index, op: str, structure: str, thread: np.ndarray, count,
-            offset: Callable[[np.ndarray, np.ndarray], np.ndarray], nbytes: int,
+            offset: Callable[[np.ndarray, np.ndarray], np.ndarray], nbytes,
             dep: bool = False, pass_fn=None) -> None:
         """Append a group in program order (after the groups already added for these threads).
 
+        ``nbytes`` is the size of every operation, or ``nbytes(i, seq)`` where
+        sizes vary (a compressed fragment).
         ``pass_fn(i, seq)`` gives the pass of each operation when one thread's
         operations of this group span several passes (``pass_index`` is then ignored).
         """
@@ -152,7 +154,8 @@ class OpPlan:
             cols["op"].append(np.full(n, OPS.index(g.op), np.uint8))
             cols["structure"].append(np.full(n, self.structures.index(g.structure), np.uint8))
             cols["address"].append(offset + np.uint64(bases[g.structure]))
-            cols["bytes"].append(np.full(n, g.bytes, np.uint32))
+            cols["bytes"].append(np.asarray(g.bytes(i, seq), np.uint32) if callable(g.bytes)
+                                 else np.full(n, g.bytes, np.uint32))
             cols["dep"].append(np.full(n, g.dep, bool))
         arrays = {k: (np.concatenate(v) if v else np.zeros(0, dtype=_EMPTY_DTYPES[k]))
                   for k, v in cols.items()}

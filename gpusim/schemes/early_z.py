@@ -1,0 +1,86 @@
+"""Phases 1 and 2 of the transparent-storage pipelines of seed 003 (Figures 2-4, 2-5, 3-1).
+
+Shared by ``tfss``, ``r-buffer`` and ``weight-factor``. Fragments arrive in
+submission order:
+
+* an **opaque** fragment is depth-tested against the z-buffer (LESS); if it
+  passes it writes the z-buffer and its colour into the frame buffer. Opaque
+  fragments never enter the transparent storage.
+* a **transparent** fragment is tested against the z-buffer *as it is when the
+  fragment arrives* (early z, no write): behind the nearest opaque fragment so
+  far it is discarded (``culled_at_arrival``); otherwise it is stored.
+* phase 2: a stored fragment that a *later* opaque fragment occludes is
+  discarded when the storage is read (``occluded_after_store``): it cost
+  storage and reads but is never blended.
+
+The z-buffer and frame buffer are the standard pipeline's; the thesis's
+Table 4-2 counts neither, so the schemes report them as structures of their
+own (``z_buffer``, ``framebuffer``) and give the thesis's total separately.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpusim.schemes.groups import PixelGroups, segment_running_min_before
+from gpusim.schemes.opstream import OpPlan
+from gpusim.schemes.result import Structure
+from gpusim.schemes.storage import DEPTH_BYTES
+
+_FAR = np.uint64(1) << np.uint64(32)     # "no opaque fragment yet": behind every key
+
+
+@dataclass(eq=False)
+class EarlyZ:
+    """Outcome of phase 1: which transparent fragments are stored and which stay visible."""
+
+    stored: np.ndarray          # bool per fragment: transparent and passed early z at arrival
+    visible: np.ndarray         # bool per fragment: stored and in front of the final nearest opaque
+    opaque_rgb: np.ndarray      # (pixel_count, 3) float32: nearest opaque colour, or the background
+    has_opaque: np.ndarray      # bool per pixel: at least one opaque fragment
+    culled_at_arrival: int
+    occluded_after_store: int
+
+
+def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_bytes: int,
+            colour_round) -> EarlyZ:
+    """Run phase 1 (adding its z-buffer and frame-buffer operations to ``plan``) and phase 2's test."""
+    opaque = trace.opaque
+    pix, key = g.pix, g.key
+    order = g.by_arrival
+    okey = np.where(opaque, key.astype(np.uint64), np.uint64(0xFFFFFFFF))   # above every depth key
+    # nearest opaque depth submitted *before* each fragment at its pixel
+    before = np.empty(g.n, np.uint64)
+    before[order] = np.minimum(segment_running_min_before(pix[order], okey[order]), _FAR)
+    stored = ~opaque & (key < before)
+    final = np.full(trace.pixel_count, _FAR)
+    if opaque.any():
+        np.minimum.at(final, pix[opaque], key[opaque].astype(np.uint64))
+    visible = stored & (key < final[pix])
+    opaque_rgb = np.empty((trace.pixel_count, 3), np.float32)
+    opaque_rgb[:] = colour_round(trace.background.astype(np.float32))
+    writes = np.flatnonzero(opaque & (key < before))            # opaque fragments passing LESS
+    if len(writes):
+        # the last write at a pixel is its nearest opaque fragment (first submitted among equals)
+        last = writes[np.lexsort((writes, pix[writes]))]
+        is_last = np.r_[pix[last][1:] != pix[last][:-1], True]
+        winners = last[is_last]
+        opaque_rgb[pix[winners]] = colour_round(trace.rgba[winners, :3])
+    # every fragment tests the z-buffer
+    plan.add(pass_index, "depth_test", "z_buffer", g.n, 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES)
+    plan.add(pass_index, "store", "framebuffer", writes, 1,
+             lambda i, s: pix[writes[i]] * framebuffer_bytes, framebuffer_bytes, dep=True)
+    return EarlyZ(stored, visible, opaque_rgb, final != _FAR,
+                  culled_at_arrival=int(np.count_nonzero(~opaque & ~stored)),
+                  occluded_after_store=int(np.count_nonzero(stored & ~visible)))
+
+
+def pipeline_buffers(pixel_count: int, framebuffer_bytes: int, colour_bits: int, has_opaque: np.ndarray,
+                     blended: np.ndarray) -> list[Structure]:
+    """The standard pipeline's z-buffer and frame buffer (not part of the thesis's Table 4-2 totals)."""
+    return [Structure("z_buffer", DEPTH_BYTES, pixel_count, int(np.count_nonzero(has_opaque)),
+                      "32-bit depth per pixel (standard pipeline)"),
+            Structure("framebuffer", framebuffer_bytes, pixel_count, int(np.count_nonzero(has_opaque | blended)),
+                      f"{4 * colour_bits}-bit RGBA per pixel (standard pipeline)")]

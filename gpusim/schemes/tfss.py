@@ -1,0 +1,238 @@
+"""The Transparent Fragment Storage System (seed 003, chapter 3; Lin 2007).
+
+Structures (Table 4-2, with N_S the number of sections actually allocated):
+
+* ``ssa_table``: one start-section address per pixel, S_A x W x H bytes,
+  cleared to NULL each frame.
+* ``t_buffer``: sections of M_section bytes holding up to ``l_num`` fragments
+  of one pixel; M_TFSS x N_S bytes. A section is allocated only when a pixel's
+  transparent fragment needs one, so a pixel without transparent fragments has
+  none and an all-opaque frame allocates no T-buffer at all.
+* ``nsa_table``: one next-section address per allocated section, S_A x N_S.
+* ``length_table`` (with leading-0s elimination, section 3.3): one entry per
+  section holding ``l_num`` colour lengths.
+
+Passes (phase 1 and 2 as in gpusim.schemes.early_z: opaque fragments go to the
+z-buffer and frame buffer, never into the TFSS; a transparent fragment behind
+the nearest opaque one so far is discarded on arrival; one occluded later is
+read but not blended):
+
+1. ``clear``: store NULL in every SSA entry.
+2. ``capture`` (Figure 3-8): a stored fragment reads its pixel's SSA entry,
+   follows the NSA chain to its pixel's last section (one NSA read per section
+   passed), and writes itself there. When that section is full (``l_num``
+   fragments, or fewer bytes free than the fragment needs) a new section is
+   taken from the allocator (a register in the TFSS controller, handed out in
+   submission order), linked from the SSA entry (first section) or from the
+   previous section's NSA entry, and its own NSA entry set to NULL. Where the
+   pixel's fill level lives the thesis does not say; the model keeps it beside
+   the address (no extra access).
+3. ``read`` (Figure 3-9): per pixel, read the SSA entry; per section of the
+   chain read the NSA entry (simultaneously with the section, section 3.2.3.2)
+   and each fragment in it; test them against the z-buffer (phase 2) and
+   blend with the weight-factor equations (gpusim.schemes.weights) over the
+   frame buffer's opaque colour. ``read_scan = "occupied"`` visits the pixels
+   that have a start section (section 4.3.2 counts one SSA look-up per pixel
+   with transparent fragments); ``"all"`` reads every SSA entry as Figure 3-9
+   draws it.
+
+Leading-0s elimination (gpusim.schemes.leading_zeros) compresses each stored
+fragment's colour; a fragment then takes ``fragment_bytes`` minus the bits
+saved, and a section holds fragments while both its ``l_num`` slots and its
+``section_bytes`` last. Fragments that had to open a section early
+(``section_breaks``) and fragments larger than a whole section
+(``unfit_fragments``, dropped) are counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.early_z import early_z, pipeline_buffers
+from gpusim.schemes.groups import PixelGroups
+from gpusim.schemes.leading_zeros import LzeMode, colour_bits, length_field_bits
+from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
+from gpusim.schemes.sections import SectionIndex, place, read_runs
+from gpusim.schemes.storage import DEPTH_BYTES
+from gpusim.schemes.weights import composite_weighted, premultiply, unorm
+
+Ties = Literal["arrival", "eq4"]
+
+
+@dataclass(frozen=True)
+class StoredColours:
+    """Integer colours of the stored fragments and what they cost in bits."""
+
+    weighted: np.ndarray     # (N, 3) float32: a_i c_i as the read process sees it
+    alpha: np.ndarray        # (N,) float32
+    bits: np.ndarray         # (N,) int64: stored bits of each fragment
+
+
+def stored_colours(rgba: np.ndarray, bits: int, fragment_bits: int, lze: str) -> StoredColours:
+    """Quantise to ``bits`` per channel, compress (leading_zeros) and give the blended values back."""
+    top = np.float32((1 << bits) - 1)
+    c = unorm(rgba[:, :3], bits)
+    a = unorm(rgba[:, 3], bits)
+    alpha = a.astype(np.float32) / top
+    if lze == "off":
+        weighted = (c.astype(np.float32) / top) * alpha[:, None]
+        rgb_bits = np.full(len(c), 3 * bits, np.int64)
+    else:
+        pm = premultiply(c, a, bits)
+        weighted = pm.astype(np.float32) / top
+        rgb_bits = colour_bits(pm, bits, lze)
+    return StoredColours(weighted, alpha, fragment_bits - 3 * bits + rgb_bits)
+
+
+@register("tfss")
+@dataclass(frozen=True)
+class TFSS(Scheme):
+    summary = "Transparent Fragment Storage System: SSA table, T-buffer sections, NSA table (seed 003)"
+
+    l_num: int = param(2, unit="fragments/section", doc="L_num: fragments one T-buffer section holds", min=1,
+                       max=65536)
+    section_bytes: int = param(0, unit="bytes", doc="M_section, bytes per section; 0 = l_num x fragment_bytes",
+                               min=0)
+    fragment_bytes: int = param(8, unit="bytes", doc="uncompressed stored fragment: 32-bit depth + RGBA",
+                                min=1)
+    address_bytes: int = param(4, unit="bytes", doc="S_A: one SSA or NSA entry", min=1, max=8)
+    leading_zero_elimination: LzeMode = param("off", doc="colour compression: off, fixed (thesis) or variable")
+    colour_bits: int = param(8, unit="bits/channel", doc="colour component bit width", min=1, max=16)
+    read_scan: Literal["occupied", "all"] = param("occupied", doc="read pass SSA look-ups: pixels with a "
+                                                  "start section (section 4.3.2) or every pixel (Figure 3-9)")
+    ties: Ties = param("arrival", doc="equal depths in the weights: arrival order, or Eq. 4 as printed")
+
+    def __post_init__(self) -> None:
+        need = 8 * DEPTH_BYTES + 4 * self.colour_bits
+        if 8 * self.fragment_bytes < need:
+            raise ValueError(f"fragment_bytes {self.fragment_bytes} cannot hold a 32-bit depth and four "
+                             f"{self.colour_bits}-bit channels ({math.ceil(need / 8)} bytes needed)")
+
+    @property
+    def m_section(self) -> int:
+        return self.section_bytes or self.l_num * self.fragment_bytes
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P, pix = len(trace), trace.pixel_count, g.pix
+        SA, M, L, bits = self.address_bytes, self.m_section, self.l_num, self.colour_bits
+        lze = self.leading_zero_elimination
+        fb_bytes = math.ceil(4 * bits / 8)
+        top = np.float32((1 << bits) - 1)
+        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
+                  Pass("read", "fullscreen", "pixel")]
+        names = ["z_buffer", "framebuffer", "ssa_table", "t_buffer", "nsa_table"]
+        names += ["length_table"] if lze != "off" else []
+        plan = OpPlan(passes, names)
+        plan.add(0, "store", "ssa_table", P, 1, lambda i, s: i * SA, SA)
+        ez = early_z(trace, g, plan, 1, fb_bytes, lambda v: (unorm(v, bits) / top).astype(np.float32))
+
+        cand = np.flatnonzero(ez.stored)
+        col = stored_colours(trace.rgba[cand], bits, 8 * self.fragment_bytes, lze)
+        frag_bits = np.zeros(n, np.int64)
+        frag_bits[cand] = col.bits
+        exact_fit = lze == "off" and self.section_bytes in (0, L * self.fragment_bytes)
+        stored_order = g.by_arrival[ez.stored[g.by_arrival]]
+        pl = place(pix, stored_order, n, L, None if exact_fit else frag_bits, None if exact_fit else 8 * M)
+
+        openers = np.flatnonzero(pl.opener)                 # submission order = allocation order
+        n_s = len(openers)
+        section = SectionIndex(pix[openers], pl.chain[openers], np.arange(n_s))
+        kept = np.flatnonzero(pl.kept)
+        sec_of = np.full(n, -1, np.int64)
+        sec_of[kept] = section(pix[kept], pl.chain[kept])
+        t_off = sec_of * M + pl.bits_before // 8
+        t_bytes = -(-frag_bits // 8)
+        lt_field = length_field_bits(bits, lze)
+        lt_bytes = math.ceil(L * lt_field / 8)
+
+        # capture (Figure 3-8), each stored fragment in program order
+        plan.add(1, "load", "ssa_table", kept, 1, lambda i, s: pix[kept[i]] * SA, SA, dep=True)
+        plan.add(1, "load", "nsa_table", kept, pl.chain[kept],
+                 lambda i, s: section(pix[kept[i]], s) * SA, SA, dep=True)
+        first = openers[pl.chain[openers] == 0]
+        later = openers[pl.chain[openers] > 0]
+        plan.add(1, "store", "nsa_table", openers, 1, lambda i, s: sec_of[openers[i]] * SA, SA, dep=True)
+        plan.add(1, "store", "ssa_table", first, 1, lambda i, s: pix[first[i]] * SA, SA, dep=True)
+        plan.add(1, "store", "nsa_table", later, 1,
+                 lambda i, s: section(pix[later[i]], pl.chain[later[i]] - 1) * SA, SA, dep=True)
+        plan.add(1, "store", "t_buffer", kept, 1, lambda i, s: t_off[kept[i]], lambda i, s: t_bytes[kept[i]],
+                 dep=True)
+        if lze != "off":
+            plan.add(1, "store", "length_table", kept, 1,
+                     lambda i, s: sec_of[kept[i]] * lt_bytes + pl.slot[kept[i]] * lt_field // 8, 1, dep=True)
+
+        # read (Figure 3-9), one thread per pixel
+        read_order = stored_order[pl.kept[stored_order]]
+        rpix, rstart, rcount = read_runs(pix, read_order, P)
+        nsec = np.zeros(P, np.int64)
+        np.add.at(nsec, pix[openers], 1)
+        if self.read_scan == "all":
+            plan.add(2, "load", "ssa_table", P, 1, lambda i, s: i * SA, SA)
+        else:
+            plan.add(2, "load", "ssa_table", rpix, 1, lambda i, s: rpix[i] * SA, SA)
+        plan.add(2, "load", "z_buffer", rpix, 1, lambda i, s: rpix[i] * DEPTH_BYTES, DEPTH_BYTES)
+        plan.add(2, "load", "nsa_table", rpix, nsec[rpix], lambda i, s: section(rpix[i], s) * SA, SA, dep=True)
+        if lze != "off":
+            plan.add(2, "load", "length_table", rpix, nsec[rpix],
+                     lambda i, s: section(rpix[i], s) * lt_bytes, lt_bytes, dep=True)
+        plan.add(2, "load", "t_buffer", rpix, rcount, lambda i, s: t_off[read_order[rstart[i] + s]],
+                 lambda i, s: t_bytes[read_order[rstart[i] + s]], dep=True)
+        vis = ez.visible & pl.kept
+        blended = np.bincount(pix[vis], minlength=P)
+        bpix = np.flatnonzero(blended)
+        plan.add(2, "load", "framebuffer", bpix, 1, lambda i, s: bpix[i] * fb_bytes, fb_bytes)
+        plan.add(2, "store", "framebuffer", bpix, 1, lambda i, s: bpix[i] * fb_bytes, fb_bytes, dep=True)
+
+        # image: Eq. 2-4 over the visible stored fragments
+        order = g.by_depth[vis[g.by_depth]]
+        weighted = np.zeros((n, 3), np.float32)
+        alpha = np.zeros(n, np.float32)
+        weighted[cand], alpha[cand] = col.weighted, col.alpha
+        image = composite_weighted(pix[order], g.key[order], weighted[order], alpha[order], ez.opaque_rgb,
+                                   self.ties).reshape(trace.height, trace.width, 3)
+
+        stored_bits = int(frag_bits[kept].sum())
+        struct = [
+            *pipeline_buffers(P, fb_bytes, bits, ez.has_opaque, blended > 0),
+            Structure("ssa_table", SA, P, len(first), "start-section address per pixel (S_A x W x H)"),
+            Structure("t_buffer", M, n_s, n_s, f"sections of M_section = {M} B, up to {L} fragments each"),
+            Structure("nsa_table", SA, n_s, int(np.count_nonzero(pl.chain[openers] > 0)),
+                      "next-section address per allocated section (S_A x N_S)"),
+        ]
+        if lze != "off":
+            struct.append(Structure("length_table", lt_bytes, n_s, n_s,
+                                    f"{L} x {lt_field}-bit colour lengths per section"))
+        storage = sum(s.allocated_bytes for s in struct[2:])   # what Table 4-2 counts
+        unfit = np.flatnonzero(ez.stored & ~pl.kept)
+        stats = {
+            "sections": Stat(n_s, "sections", "N_S: T-buffer sections allocated"),
+            "storage_system_bytes": Stat(storage, "bytes", "Table 4-2 total: T-buffer + SSA + NSA "
+                                                           "(+ Length Table with leading-0s elimination)"),
+            "transparent_pixels": Stat(len(rpix), "pixels", "pixels with at least one stored fragment"),
+            "stored_fragments": Stat(len(kept), "fragments", "transparent fragments written to the T-buffer"),
+            "culled_at_arrival": Stat(ez.culled_at_arrival, "fragments",
+                                      "transparent fragments behind the nearest opaque one so far (not stored)"),
+            "occluded_after_store": Stat(ez.occluded_after_store, "fragments",
+                                         "stored fragments a later opaque fragment hid (read, not blended)"),
+            "section_fill": Stat(round(stored_bits / (8 * M * n_s), 6) if n_s else 0.0, "fraction",
+                                 "stored fragment bits / T-buffer bits"),
+            "stored_bits_per_fragment": Stat(round(stored_bits / len(kept), 4) if len(kept) else 0.0, "bits",
+                                             "mean stored size of a fragment after compression"),
+            "section_breaks": Stat(pl.early_breaks, "fragments",
+                                   "fragments that opened a new section because the current one lacked bytes"),
+            "unfit_fragments": Stat(len(unfit), "fragments",
+                                    "fragments larger than a whole section (dropped)"),
+        }
+        return SchemeResult(
+            self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
+            dropped_fragments=len(unfit), overflowed_pixels=int(len(np.unique(pix[unfit]))),
+            lists=CapturedLists(pix[order], order), stats=stats,
+            extras={"read_per_pixel": np.bincount(pix[kept], minlength=P)})
