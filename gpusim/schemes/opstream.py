@@ -12,7 +12,9 @@ so they cannot disagree.
 Rows are ordered by pass, then thread, then program order inside the thread.
 A thread is a fragment (geometry passes, numbered in submission order after
 any reordering the scheme applies), a pixel (full-screen passes: the pixel id
-``y * width + x``) or a memory entry (clear passes). Addresses are bytes in
+``y * width + x``), a memory entry (clear passes) or, in a ``buffer`` pass
+(a hardware unit streaming a fragment buffer, as the R-buffer's recirculation),
+the stored fragment (its trace index). Addresses are bytes in
 one flat space; each structure starts at a 4 KiB-aligned base.
 
 Operations (``OPS``):
@@ -46,7 +48,7 @@ from gpusim.errors import GpusimError
 
 OPS = ("load", "store", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
        "rmw_read", "rmw_write", "blend", "depth_test", "stencil")
-PASS_KINDS = ("clear", "geometry", "fullscreen", "flush")
+PASS_KINDS = ("clear", "geometry", "fullscreen", "flush", "buffer")
 THREAD_KINDS = ("fragment", "pixel", "entry", "none")
 BASE_ALIGN = 4096          # bytes
 DEFAULT_MAX_OPS = 200_000_000

@@ -1,0 +1,170 @@
+"""The R-buffer (Wittenbrink 2001, as in seed 003 section 2.5.1 and Figures 2-3, 2-4).
+
+Structures (Table 4-2): ``r_buffer``, a FIFO of N_f x S_f bytes (N_f: the
+transparent fragments stored after early z; S_f: a fragment with its x, y, z
+and RGBA, since a FIFO entry does not know its pixel); ``second_z_buffer``
+(W x H depths); ``state_memory`` (3 bits per pixel; the thesis gives its size
+but not its accesses, so the model issues none).
+
+Passes:
+
+1. ``clear``: the second z-buffer is set to the nearest depth.
+2. ``capture`` (phase 1, gpusim.schemes.early_z): opaque fragments go to the
+   z-buffer and frame buffer; a transparent fragment that passes early z is
+   appended to the FIFO and raises its pixel's second-z to the furthest
+   stored depth (one ROP depth test).
+3. ``recirculate p`` (phases 2 and 3, Figure 2-4), p = 1, 2, ...: every
+   fragment still in the FIFO is read and compared with its pixel's second-z
+   (seed 003 section 4.3.2: pass p reads every fragment still in the buffer and
+   the second z-buffer as often). One whose depth equals it is blended into the
+   frame buffer back to front (Eq. 1) and leaves; the others are written back
+   to the FIFO's tail and raise the next pass's second-z. Pass 1 also drops
+   the fragments a later opaque fragment occludes (phase 2); if the furthest
+   stored fragment was one of them, that pixel blends nothing in pass 1.
+
+Equal depths match the second-z together and are blended in the same pass in
+FIFO (arrival) order, so the earlier fragment ends up *behind* the later one,
+the opposite of the reference's order (``tie_blends`` counts them). With
+distinct depths a pixel with i fragments is read i(i+1)/2 times in total.
+The FIFO is circular: the k-th write goes to entry k mod N_f.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.schemes.arrays import pixel_key
+from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.early_z import early_z, pipeline_buffers
+from gpusim.schemes.fold import fold
+from gpusim.schemes.groups import PixelGroups
+from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
+from gpusim.schemes.weights import unorm
+
+
+def far_rank(pix: np.ndarray, key: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """For fragments ``idx``: how many distinct depths of their pixel (among ``idx``) lie behind them."""
+    order = idx[np.argsort(pixel_key(pix[idx], ~key[idx]), kind="stable")]
+    p, k = pix[order], key[order]
+    new_pixel = np.r_[True, p[1:] != p[:-1]]
+    new_value = new_pixel | np.r_[True, k[1:] != k[:-1]]
+    steps = np.cumsum(new_value) - 1
+    start = np.flatnonzero(new_pixel)
+    first = np.repeat(steps[start], np.diff(np.r_[start, len(order)]))
+    rank = np.empty(len(pix), np.int64)
+    rank[order] = steps - first
+    return rank[idx]
+
+
+def fifo_sequence(pos: np.ndarray, pass_no: np.ndarray, members: np.ndarray) -> np.ndarray:
+    """Global FIFO sequence number of every (fragment, pass) read.
+
+    ``pos`` is the fragment's position in the first pass's FIFO, ``pass_no``
+    the 1-based pass; the pairs must be all reads of each pass given.
+    ``members[p - 1]`` is how many fragments pass p reads.
+    """
+    offset = np.r_[0, np.cumsum(members)]
+    key = pass_no.astype(np.int64) * (int(pos.max(initial=0)) + 1) + pos
+    order = np.argsort(key, kind="stable")
+    rank = np.empty(len(key), np.int64)
+    sorted_pass = pass_no[order]
+    group_start = np.searchsorted(sorted_pass, sorted_pass, side="left")
+    rank[order] = np.arange(len(key)) - group_start
+    return offset[pass_no - 1] + rank
+
+
+@register("r-buffer")
+@dataclass(frozen=True)
+class RBuffer(Scheme):
+    summary = "R-buffer: recirculating FIFO of transparent fragments + second z-buffer (Wittenbrink 2001)"
+
+    fragment_bytes: int = param(16, unit="bytes", doc="S_f: x, y, z (32-bit each) + RGBA of a FIFO entry", min=1)
+    depth_bytes: int = param(4, unit="bytes", doc="one second-z-buffer entry (as the z-buffer's)", min=1, max=8)
+    state_bits: int = param(3, unit="bits/pixel", doc="pixel state memory per pixel", min=0, max=64)
+    colour_bits: int = param(8, unit="bits/channel", doc="colour component bit width (FIFO and frame buffer)",
+                             min=1, max=16)
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P, pix = len(trace), trace.pixel_count, g.pix
+        SF, ZB, bits = self.fragment_bytes, self.depth_bytes, self.colour_bits
+        fb_bytes = math.ceil(4 * bits / 8)
+        top = np.float32((1 << bits) - 1)
+        rnd = lambda v: (unorm(v, bits) / top).astype(np.float32)  # noqa: E731
+
+        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment")]
+        plan = OpPlan(passes, ["z_buffer", "framebuffer", "r_buffer", "second_z_buffer", "state_memory"])
+        plan.add(0, "store", "second_z_buffer", P, 1, lambda i, s: i * ZB, ZB)
+        ez = early_z(trace, g, plan, 1, fb_bytes, rnd)
+        stored = np.flatnonzero(ez.stored)                      # FIFO order = submission order
+        n_f = len(stored)
+        pos = np.arange(n_f)
+        occluded = ~ez.visible[stored]
+        vis_idx = stored[~occluded]
+        shift = np.zeros(P, np.int64)
+        shift[pix[stored[occluded]]] = 1
+        removal = np.ones(n_f, np.int64)                         # 1-based pass in which it leaves
+        removal[~occluded] = shift[pix[vis_idx]] + far_rank(pix, g.key, vis_idx) + 1
+        n_pass = int(removal.max(initial=0))
+        members = np.bincount(removal, minlength=n_pass + 1)[::-1].cumsum()[::-1][1:]   # reads per pass
+        plan.passes.extend(Pass(f"recirculate {p}", "buffer", "fragment") for p in range(1, n_pass + 1))
+
+        slot = lambda seq: (seq % max(n_f, 1)) * SF  # noqa: E731
+        plan.add(1, "store", "r_buffer", stored, 1, lambda i, s: slot(pos[i]), SF, dep=True)
+        plan.add(1, "depth_test", "second_z_buffer", stored, 1, lambda i, s: pix[stored[i]] * ZB, ZB, dep=True)
+        read_pass = lambda i, s: 2 + s  # noqa: E731  (pass index of read s + 1)
+        plan.add(0, "load", "r_buffer", stored, removal,
+                 lambda i, s: slot(fifo_sequence(pos[i], s + 1, members)), SF, pass_fn=read_pass)
+        plan.add(0, "depth_test", "second_z_buffer", stored, removal, lambda i, s: pix[stored[i]] * ZB, ZB,
+                 dep=True, pass_fn=read_pass)
+        vis_pos = np.flatnonzero(~occluded)
+        plan.add(0, "blend", "framebuffer", stored[vis_pos], 1, lambda i, s: pix[stored[vis_pos[i]]] * fb_bytes,
+                 fb_bytes, dep=True, pass_fn=lambda i, s: 1 + removal[vis_pos[i]])
+        plan.add(0, "store", "r_buffer", stored, removal - 1,
+                 lambda i, s: slot(fifo_sequence(pos[i], s + 2, members)), SF, dep=True, pass_fn=read_pass)
+
+        # image: back to front, equal depths in FIFO order, rounded after every blend (Eq. 1)
+        blend_order = vis_idx[np.lexsort((vis_idx, ~g.key[vis_idx], pix[vis_idx]))]
+        rgba = np.zeros((n, 4), np.float32)
+        rgba[stored] = rnd(trace.rgba[stored])
+
+        def step(state, f):
+            a = rgba[f, 3:4]
+            return rnd(a * rgba[f, :3] + (1 - a) * state)
+
+        image = fold(pix, blend_order, ez.opaque_rgb.copy(), step).reshape(trace.height, trace.width, 3)
+        same = np.r_[False, (pix[blend_order][1:] == pix[blend_order][:-1])
+                     & (g.key[blend_order][1:] == g.key[blend_order][:-1])]
+        blended = np.bincount(pix[vis_idx], minlength=P) > 0
+        struct = [
+            *pipeline_buffers(P, fb_bytes, bits, ez.has_opaque, blended),
+            Structure("r_buffer", SF, n_f, n_f, "FIFO of stored transparent fragments (N_f x S_f)"),
+            Structure("second_z_buffer", ZB, P, int(np.count_nonzero(np.bincount(pix[stored], minlength=P))),
+                      "furthest remaining transparent depth per pixel"),
+            Structure("state_memory", 1, math.ceil(self.state_bits * P / 8), 0,
+                      f"{self.state_bits} bits of pixel state per pixel (no accesses modelled)"),
+        ]
+        storage = sum(s.allocated_bytes for s in struct[2:])
+        front_to_back = blend_order[::-1]
+        front_to_back = front_to_back[np.argsort(pix[front_to_back], kind="stable")]
+        stats = {
+            "recirculation_passes": Stat(n_pass, "passes", "FIFO passes until the R-buffer is empty"),
+            "storage_system_bytes": Stat(storage, "bytes", "Table 4-2 total: R-buffer + second z-buffer + "
+                                                           "state memory"),
+            "stored_fragments": Stat(n_f, "fragments", "N_f: transparent fragments written to the FIFO"),
+            "culled_at_arrival": Stat(ez.culled_at_arrival, "fragments",
+                                      "transparent fragments behind the nearest opaque one so far (not stored)"),
+            "occluded_after_store": Stat(ez.occluded_after_store, "fragments",
+                                         "stored fragments a later opaque fragment hid (dropped in pass 1)"),
+            "tie_blends": Stat(int(np.count_nonzero(same)), "fragments",
+                               "fragments blended in the same pass as an equal-depth one (FIFO order)"),
+        }
+        return SchemeResult(
+            self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
+            dropped_fragments=0, overflowed_pixels=0, lists=CapturedLists(pix[front_to_back], front_to_back),
+            stats=stats, extras={"read_per_pixel": np.bincount(pix[stored], minlength=P)})
