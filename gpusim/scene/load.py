@@ -16,6 +16,7 @@ from gpusim.config import apply_overrides, build, load_toml, to_dict
 from gpusim.errors import ConfigError
 from gpusim.raster import rasterize
 from gpusim.scene.build import scene_triangles
+from gpusim.scene.histogram import HistogramScene, histogram_trace
 from gpusim.scene.model import Scene
 from gpusim.trace import FragmentTrace
 
@@ -59,8 +60,13 @@ def mesh_scene_table(mesh: Path, alpha: float) -> dict:
                          "color": [0.85, 0.75, 0.6]}]}
 
 
-def load_scene(arg: str, overrides: Iterable[str] = (), alpha: float | None = None) -> tuple[Scene, Path]:
-    """Load a scene (file, mesh or built-in name) with ``--set`` overrides; returns it and its folder."""
+def load_scene(arg: str, overrides: Iterable[str] = (), alpha: float | None = None
+               ) -> tuple[Scene | HistogramScene, Path]:
+    """Load a scene (file, mesh or built-in name) with ``--set`` overrides; returns it and its folder.
+
+    A file with ``kind = "histogram"`` at its top level is a histogram scene
+    (gpusim.scene.histogram); any other is a geometric :class:`Scene`.
+    """
     path = resolve_scene(arg)
     if path.suffix.lower() in MESH_SUFFIXES:
         a = 0.5 if alpha is None else alpha
@@ -75,12 +81,15 @@ def load_scene(arg: str, overrides: Iterable[str] = (), alpha: float | None = No
         raise ConfigError(f"{path}: unsupported scene file type '{path.suffix}' "
                           f"(valid: .toml, {', '.join(MESH_SUFFIXES)})")
     apply_overrides(table, overrides)
-    return build(Scene, table, str(path)), path.parent
+    kind = HistogramScene if table.get("kind") == "histogram" else Scene
+    return build(kind, table, str(path)), path.parent
 
 
-def trace_scene(scene: Scene, base_dir: Path, where: str = "scene",
+def trace_scene(scene: Scene | HistogramScene, base_dir: Path, where: str = "scene",
                 progress: bool | None = None) -> FragmentTrace:
     """Rasterize a scene into a fragment trace whose metadata records the resolved scene."""
+    if isinstance(scene, HistogramScene):
+        return histogram_trace(scene)
     batch = scene_triangles(scene, base_dir, where)
     meta = {"scene": scene.name, "generator": "gpusim trace", "gpusim_version": __version__,
             "background": list(scene.screen.background), "primitives": len(batch),

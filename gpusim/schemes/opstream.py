@@ -123,13 +123,26 @@ class OpPlan:
     def total_ops(self) -> int:
         return sum(g.total for g in self.groups)
 
-    def accesses(self) -> dict[str, dict[str, int]]:
-        """Operation counts per structure and operation (no expansion)."""
+    def accesses(self, kinds: set[str] | None = None) -> dict[str, dict[str, int]]:
+        """Operation counts per structure and operation (no expansion).
+
+        ``kinds`` keeps the groups whose pass is of one of those kinds (a group
+        spanning several passes with ``pass_fn`` is counted under the kind of
+        its ``pass_index``; the passes it spans share that kind).
+        """
         out: dict[str, dict[str, int]] = {}
         for g in self.groups:
+            if kinds is not None and not self._kinds_of(g) <= kinds:
+                if self._kinds_of(g) & kinds:
+                    raise ValueError("a group spans passes of several kinds; count it by expansion")
+                continue
             ops = out.setdefault(g.structure, {})
             ops[g.op] = ops.get(g.op, 0) + g.total
         return out
+
+    def _kinds_of(self, g: OpGroup) -> set[str]:
+        index = {int(g.pass_index)} if np.isscalar(g.pass_index) else set(np.unique(g.pass_index).tolist())
+        return {self.passes[i].kind for i in index}
 
     def expand(self, bases: dict[str, int], max_ops: int = DEFAULT_MAX_OPS) -> "OpStream":
         """One row per operation, ordered by (pass, thread, program order)."""
