@@ -13,6 +13,7 @@ submission order:
   discarded when the storage is read (``occluded_after_store``): it cost
   storage and reads but is never blended.
 
+A frame without opaque fragments builds no z-buffer and tests nothing.
 The z-buffer and frame buffer are the standard pipeline's; the thesis's
 Table 4-2 counts neither, so the schemes report them as structures of their
 own (``z_buffer``, ``framebuffer``) and give the thesis's total separately.
@@ -40,6 +41,7 @@ class EarlyZ:
     visible: np.ndarray         # bool per fragment: stored and in front of the final nearest opaque
     opaque_rgb: np.ndarray      # (pixel_count, 3) float32: nearest opaque colour, or the background
     has_opaque: np.ndarray      # bool per pixel: at least one opaque fragment
+    uses_z: bool                # the frame has opaque fragments (else no z-buffer is built or tested)
     culled_at_arrival: int
     occluded_after_store: int
 
@@ -68,19 +70,34 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
         is_last = np.r_[pix[last][1:] != pix[last][:-1], True]
         winners = last[is_last]
         opaque_rgb[pix[winners]] = colour_round(trace.rgba[winners, :3])
-    # every fragment tests the z-buffer
-    plan.add(pass_index, "depth_test", "z_buffer", g.n, 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES)
+    uses_z = bool(opaque.any())
+    if uses_z:   # every fragment tests the z-buffer
+        plan.add(pass_index, "depth_test", "z_buffer", g.n, 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES)
     plan.add(pass_index, "store", "framebuffer", writes, 1,
              lambda i, s: pix[writes[i]] * framebuffer_bytes, framebuffer_bytes, dep=True)
-    return EarlyZ(stored, visible, opaque_rgb, final != _FAR,
+    return EarlyZ(stored, visible, opaque_rgb, final != _FAR, uses_z,
                   culled_at_arrival=int(np.count_nonzero(~opaque & ~stored)),
                   occluded_after_store=int(np.count_nonzero(stored & ~visible)))
 
 
-def pipeline_buffers(pixel_count: int, framebuffer_bytes: int, colour_bits: int, has_opaque: np.ndarray,
+PIPELINE = ("z_buffer", "framebuffer")
+
+
+def pipeline_structures(trace, names: list[str]) -> list[str]:
+    """``names`` after the pipeline buffers this frame needs (no z-buffer without opaque fragments)."""
+    return (["z_buffer"] if trace.opaque.any() else []) + ["framebuffer"] + names
+
+
+def storage_bytes(structures: list[Structure]) -> int:
+    """Bytes of the transparent storage system alone (what Table 4-2 counts)."""
+    return sum(s.allocated_bytes for s in structures if s.name not in PIPELINE)
+
+
+def pipeline_buffers(pixel_count: int, framebuffer_bytes: int, colour_bits: int, ez: EarlyZ,
                      blended: np.ndarray) -> list[Structure]:
     """The standard pipeline's z-buffer and frame buffer (not part of the thesis's Table 4-2 totals)."""
-    return [Structure("z_buffer", DEPTH_BYTES, pixel_count, int(np.count_nonzero(has_opaque)),
-                      "32-bit depth per pixel (standard pipeline)"),
-            Structure("framebuffer", framebuffer_bytes, pixel_count, int(np.count_nonzero(has_opaque | blended)),
+    has_opaque = ez.has_opaque
+    z = [Structure("z_buffer", DEPTH_BYTES, pixel_count, int(np.count_nonzero(has_opaque)),
+                   "32-bit depth per pixel (standard pipeline)")] if ez.uses_z else []
+    return z + [Structure("framebuffer", framebuffer_bytes, pixel_count, int(np.count_nonzero(has_opaque | blended)),
                       f"{4 * colour_bits}-bit RGBA per pixel (standard pipeline)")]

@@ -39,7 +39,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.schemes.arrays import pixel_key
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import early_z, pipeline_buffers
+from gpusim.schemes.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
 from gpusim.schemes.fold import fold
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
@@ -98,7 +98,7 @@ class RBuffer(Scheme):
         rnd = lambda v: (unorm(v, bits) / top).astype(np.float32)  # noqa: E731
 
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment")]
-        plan = OpPlan(passes, ["z_buffer", "framebuffer", "r_buffer", "second_z_buffer", "state_memory"])
+        plan = OpPlan(passes, pipeline_structures(trace, ["r_buffer", "second_z_buffer", "state_memory"]))
         plan.add(0, "store", "second_z_buffer", P, 1, lambda i, s: i * ZB, ZB)
         ez = early_z(trace, g, plan, 1, fb_bytes, rnd)
         stored = np.flatnonzero(ez.stored)                      # FIFO order = submission order
@@ -142,14 +142,14 @@ class RBuffer(Scheme):
                      & (g.key[blend_order][1:] == g.key[blend_order][:-1])]
         blended = np.bincount(pix[vis_idx], minlength=P) > 0
         struct = [
-            *pipeline_buffers(P, fb_bytes, bits, ez.has_opaque, blended),
+            *pipeline_buffers(P, fb_bytes, bits, ez, blended),
             Structure("r_buffer", SF, n_f, n_f, "FIFO of stored transparent fragments (N_f x S_f)"),
             Structure("second_z_buffer", ZB, P, int(np.count_nonzero(np.bincount(pix[stored], minlength=P))),
                       "furthest remaining transparent depth per pixel"),
             Structure("state_memory", 1, math.ceil(self.state_bits * P / 8), 0,
                       f"{self.state_bits} bits of pixel state per pixel (no accesses modelled)"),
         ]
-        storage = sum(s.allocated_bytes for s in struct[2:])
+        storage = storage_bytes(struct)
         front_to_back = blend_order[::-1]
         front_to_back = front_to_back[np.argsort(pix[front_to_back], kind="stable")]
         stats = {

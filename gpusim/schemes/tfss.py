@@ -54,7 +54,7 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import early_z, pipeline_buffers
+from gpusim.schemes.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.leading_zeros import LzeMode, colour_bits, length_field_bits
 from gpusim.schemes.opstream import OpPlan, Pass
@@ -128,7 +128,7 @@ class TFSS(Scheme):
         top = np.float32((1 << bits) - 1)
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
                   Pass("read", "fullscreen", "pixel")]
-        names = ["z_buffer", "framebuffer", "ssa_table", "t_buffer", "nsa_table"]
+        names = pipeline_structures(trace, ["ssa_table", "t_buffer", "nsa_table"])
         names += ["length_table"] if lze != "off" else []
         plan = OpPlan(passes, names)
         plan.add(0, "store", "ssa_table", P, 1, lambda i, s: i * SA, SA)
@@ -178,7 +178,8 @@ class TFSS(Scheme):
             plan.add(2, "load", "ssa_table", P, 1, lambda i, s: i * SA, SA)
         else:
             plan.add(2, "load", "ssa_table", rpix, 1, lambda i, s: rpix[i] * SA, SA)
-        plan.add(2, "load", "z_buffer", rpix, 1, lambda i, s: rpix[i] * DEPTH_BYTES, DEPTH_BYTES)
+        if ez.uses_z:   # phase 2: the stored fragments meet the final opaque depth
+            plan.add(2, "load", "z_buffer", rpix, 1, lambda i, s: rpix[i] * DEPTH_BYTES, DEPTH_BYTES)
         plan.add(2, "load", "nsa_table", rpix, nsec[rpix], lambda i, s: section(rpix[i], s) * SA, SA, dep=True)
         if lze != "off":
             plan.add(2, "load", "length_table", rpix, nsec[rpix],
@@ -201,7 +202,7 @@ class TFSS(Scheme):
 
         stored_bits = int(frag_bits[kept].sum())
         struct = [
-            *pipeline_buffers(P, fb_bytes, bits, ez.has_opaque, blended > 0),
+            *pipeline_buffers(P, fb_bytes, bits, ez, blended > 0),
             Structure("ssa_table", SA, P, len(first), "start-section address per pixel (S_A x W x H)"),
             Structure("t_buffer", M, n_s, n_s, f"sections of M_section = {M} B, up to {L} fragments each"),
             Structure("nsa_table", SA, n_s, int(np.count_nonzero(pl.chain[openers] > 0)),
@@ -210,7 +211,7 @@ class TFSS(Scheme):
         if lze != "off":
             struct.append(Structure("length_table", lt_bytes, n_s, n_s,
                                     f"{L} x {lt_field}-bit colour lengths per section"))
-        storage = sum(s.allocated_bytes for s in struct[2:])   # what Table 4-2 counts
+        storage = storage_bytes(struct)
         unfit = np.flatnonzero(ez.stored & ~pl.kept)
         stats = {
             "sections": Stat(n_s, "sections", "N_S: T-buffer sections allocated"),

@@ -27,7 +27,7 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import early_z, pipeline_buffers
+from gpusim.schemes.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
@@ -64,7 +64,7 @@ class WeightFactor(Scheme):
         top = np.float32((1 << bits) - 1)
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
                   Pass("read", "fullscreen", "pixel")]
-        plan = OpPlan(passes, ["z_buffer", "framebuffer", "m_buffer", "pointer_memory"])
+        plan = OpPlan(passes, pipeline_structures(trace, ["m_buffer", "pointer_memory"]))
         plan.add(0, "store", "pointer_memory", P, 1, lambda i, s: i * SA, SA)
         ez = early_z(trace, g, plan, 1, fb_bytes, lambda v: (unorm(v, bits) / top).astype(np.float32))
 
@@ -90,7 +90,8 @@ class WeightFactor(Scheme):
 
         rpix, rstart, rcount = read_runs(pix, stored_order, P)
         nsec = -(-rcount // D)
-        plan.add(2, "load", "z_buffer", rpix, 1, lambda i, s: rpix[i] * DEPTH_BYTES, DEPTH_BYTES)
+        if ez.uses_z:   # phase 2: the stored fragments meet the final opaque depth
+            plan.add(2, "load", "z_buffer", rpix, 1, lambda i, s: rpix[i] * DEPTH_BYTES, DEPTH_BYTES)
         plan.add(2, "load", "pointer_memory", rpix, nsec, lambda i, s: section(rpix[i], s) * SA, SA)
         plan.add(2, "load", "m_buffer", rpix, rcount, lambda i, s: m_off[stored_order[rstart[i] + s]], FB,
                  dep=True)
@@ -110,12 +111,12 @@ class WeightFactor(Scheme):
 
         sections = P + n_a
         struct = [
-            *pipeline_buffers(P, fb_bytes, bits, ez.has_opaque, blended > 0),
+            *pipeline_buffers(P, fb_bytes, bits, ez, blended > 0),
             Structure("m_buffer", M, sections, len(static) + n_a,
                       f"W x H static + N_A dynamic sections of D_avg = {D} fragments"),
             Structure("pointer_memory", SA, sections, n_a, "next-section pointer per section"),
         ]
-        storage = sum(s.allocated_bytes for s in struct[2:])
+        storage = storage_bytes(struct)
         stats = {
             "dynamic_sections": Stat(n_a, "sections", "N_A: sections allocated beyond the W x H static ones"),
             "storage_system_bytes": Stat(storage, "bytes", "Table 4-2 total: M-buffer + pointer memory"),
