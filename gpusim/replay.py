@@ -7,6 +7,7 @@ from typing import Any
 
 from gpusim.config import parse_override
 from gpusim.errors import ConfigError, GpusimError
+from gpusim.hw import FIDELITIES
 from gpusim.metrics import composite_exact, image_error
 from gpusim.schemes import make_scheme
 from gpusim.schemes.result import SchemeResult, Stat
@@ -24,9 +25,11 @@ def parse_params(items: list[str] | None) -> dict[str, Any]:
     return params
 
 
-def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = None
-           ) -> tuple[SchemeResult, dict, Any, Any]:
-    """Run ``scheme``; returns (result, record, image, reference)."""
+def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = None,
+           fidelity: str | None = None) -> tuple[SchemeResult, dict, Any, Any]:
+    """Run ``scheme`` (and the timing model ``fidelity``, if given); returns (result, record, image, reference)."""
+    if fidelity is not None and fidelity not in FIDELITIES:
+        raise ConfigError(f"--fidelity {fidelity}: unknown fidelity level (valid: {', '.join(FIDELITIES)})")
     model = make_scheme(scheme, params, where=f"--scheme {scheme} --param")
     start = time.perf_counter()
     try:
@@ -57,4 +60,8 @@ def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = No
         "error": {k: error[k] for k in ("rmse", "psnr", "differing_pixels", "differing_share", "max_abs")},
         "wall_seconds": wall,
     }
+    if fidelity is not None:
+        start = time.perf_counter()
+        timing = FIDELITIES[fidelity](result)
+        record["timing"] = timing | {"wall_seconds": time.perf_counter() - start}
     return result, record, result.image, reference

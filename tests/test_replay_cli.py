@@ -94,3 +94,14 @@ def test_output_piped_into_a_closed_reader_exits_quietly():
     err = proc.stderr.read().decode()
     proc.wait(timeout=60)
     assert "Traceback" not in err
+
+
+def test_replay_thesis_fidelity_reports_cycles(trace_file, capsys):
+    assert main(["replay", str(trace_file), "--scheme", "tfss", "--fidelity", "thesis", "--json"]) == 0
+    timing = json.loads(capsys.readouterr().out)["timing"]
+    assert timing["fidelity"] == "thesis" and timing["cycles"] == timing["memory_cycles"] + timing["compute_cycles"]
+    assert main(["replay", str(trace_file), "--scheme", "r-buffer", "--fidelity", "thesis"]) == 0
+    assert "cycles" in capsys.readouterr().out
+    assert main(["replay", str(trace_file), "--scheme", "kbuffer", "--fidelity", "thesis"]) == 2
+    err = capsys.readouterr().err
+    assert "models only r-buffer, tfss, weight-factor" in err and len(err.strip().splitlines()) == 1

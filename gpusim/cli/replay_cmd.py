@@ -9,6 +9,7 @@ import numpy as np
 
 from gpusim.atomic_io import write_text_atomic
 from gpusim.cli.common import jsonable, print_json
+from gpusim.hw import FIDELITIES
 from gpusim.replay import parse_params, replay
 from gpusim.schemes import scheme_names
 from gpusim.trace_io import load_trace
@@ -23,6 +24,9 @@ def add_parser(sub) -> None:
     p.add_argument("--scheme", required=True, metavar="NAME", help="scheme name (see 'gpusim schemes')")
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="scheme parameter (repeatable), e.g. --param layers=8")
+    p.add_argument("--fidelity", choices=sorted(FIDELITIES), metavar="LEVEL",
+                   help="also run a timing model: " + ", ".join(sorted(FIDELITIES))
+                        + " (thesis: seed 003 section 4.3.2, for tfss, r-buffer and weight-factor)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="write image.png, difference.png and stats.json to DIR")
@@ -36,7 +40,7 @@ def _mib(n: int) -> str:
 def run(args) -> int:
     trace = load_trace(args.trace)
     params = parse_params(args.param)
-    result, record, image, reference = replay(trace, args.scheme, params)
+    result, record, image, reference = replay(trace, args.scheme, params, args.fidelity)
     if args.output:
         _write_outputs(Path(args.output), record, image, reference)
     if args.json:
@@ -60,6 +64,10 @@ def run(args) -> int:
     psnr = "inf" if e["psnr"] == float("inf") else f"{e['psnr']:.2f}"
     print(f"error        rmse {e['rmse']:.3g}, psnr {psnr} dB, {e['differing_pixels']:,} pixels differ "
           f"by more than one 8-bit step")
+    if "timing" in record:
+        t = record["timing"]
+        print(f"cycles       {t['cycles']:,} ({t['fidelity']}: {t['memory_cycles']:,} memory + "
+              f"{t['compute_cycles']:,} compute, {t['compute_formula']} per pixel)")
     print(f"wall         {record['wall_seconds']:.3f} s (functional model)")
     if args.output:
         print(f"wrote        {args.output}/image.png, difference.png, stats.json")
