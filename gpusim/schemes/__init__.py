@@ -6,7 +6,7 @@ gpusim.schemes.opstream for the operations a scheme reports.
 """
 
 from gpusim.schemes import (  # noqa: F401  (importing registers each scheme)
-    blending, depth_peeling, freepipe_abuffer, freepipe_mdts, kbuffer, linked_list, rbuffer, srab, tfss, weight_factor)
+    blending, depth_peeling, freepipe_abuffer, freepipe_mdts, kbuffer, linked_list, lucidraster, rbuffer, srab, tfss, weight_factor)
 from gpusim.schemes.base import REGISTRY, Scheme, describe_scheme, make_scheme, scheme_class, scheme_names
 from gpusim.schemes.result import SchemeResult
 

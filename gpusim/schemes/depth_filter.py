@@ -19,15 +19,19 @@ from gpusim.metrics.composite import runs_by_length
 _NONE = np.iinfo(np.int64).max
 
 
-def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacity: int) -> np.ndarray:
+def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacity: int,
+               return_steps: bool = False):
     """Fragment indices in the order the queue emits them, grouped by pixel (ascending).
 
     ``by_arrival`` lists fragment indices grouped by pixel in arrival order.
-    After the last arrival the queue drains nearest first.
+    After the last arrival the queue drains nearest first. With
+    ``return_steps`` also returns, per emitted entry, the 0-based arrival rank
+    whose arrival pushed it out (``count + k`` for the k-th entry drained).
     """
     n = len(by_arrival)
     if n == 0:
-        return np.zeros(0, np.int64)
+        empty = np.zeros(0, np.int64)
+        return (empty, empty) if return_steps else empty
     pix_sorted = pix[by_arrival]
     start_c, count_c, active = runs_by_length(pix_sorted)
     arrival_pos = np.arange(n, dtype=np.int64)          # position in by_arrival breaks ties by arrival
@@ -59,4 +63,6 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
     emitted_step[out:out + m_rest] = count_c[rows] + np.broadcast_to(np.arange(capacity), rest.shape)[valid]
     pixel_of = pix_sorted[emitted_pos]
     order = np.lexsort((emitted_step, pixel_of))
+    if return_steps:
+        return by_arrival[emitted_pos[order]], emitted_step[order]
     return by_arrival[emitted_pos[order]]
