@@ -123,6 +123,23 @@ def sliver_fan(spec: m.SliverFan) -> MeshData:
     return MeshData(verts, faces, np.tile([0.0, 0.0, 1.0], (len(verts), 1)))
 
 
+def leaves(spec: m.Leaves) -> MeshData:
+    rng = np.random.default_rng(spec.seed)
+    n = spec.count
+    centre = (rng.random((n, 3)) - 0.5) * spec.spread
+    axis_u = _unit(rng.normal(size=(n, 3)))
+    axis_v = _unit(np.cross(axis_u, rng.normal(size=(n, 3))))
+    u = axis_u * spec.size[0] / 2
+    v = axis_v * spec.size[1] / 2
+    verts = np.stack([centre - u - v, centre + u - v, centre + u + v, centre - u + v], axis=1)
+    base = (np.arange(n) * 4)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
+    normal = np.repeat(_unit(np.cross(axis_u, axis_v)), 4, axis=0)
+    colour = np.clip(np.asarray(spec.color) + (rng.random((n, 3)) - 0.5) * 2 * spec.color_jitter, 0.0, 1.0)
+    rgba = np.repeat(np.concatenate([colour, np.full((n, 1), spec.alpha)], axis=1), 4, axis=0)
+    return MeshData(verts.reshape(-1, 3), faces.astype(np.int64), normal, rgba)
+
+
 def mesh_file(spec: m.Mesh, base_dir: Path, where: str) -> MeshData:
     import trimesh  # deferred: only scenes with mesh files pay for the import
 
@@ -155,4 +172,4 @@ def mesh_file(spec: m.Mesh, base_dir: Path, where: str) -> MeshData:
 
 
 GENERATORS = {"sphere": sphere, "box": box, "quad-grid": quad_grid,
-              "layered-quads": layered_quads, "sliver-fan": sliver_fan}
+              "layered-quads": layered_quads, "sliver-fan": sliver_fan, "leaves": leaves}

@@ -156,6 +156,23 @@ class SliverFan(ObjectSpec):
     arc_deg: float = param(90.0, unit="deg", doc="angle the whole fan spans", gt=0.0, max=360.0)
 
 
+@_register("leaves")
+@dataclass(frozen=True, kw_only=True)
+class Leaves(ObjectSpec):
+    """``count`` randomly placed and oriented quads in a cube of side ``spread``: foliage.
+
+    They cross each other freely, the case where per-block depth sorting of
+    whole triangles fails (seed 002's invalid pixels in foliage scenes).
+    Colours vary by up to ``color_jitter`` around ``color``.
+    """
+
+    count: int = param(2000, unit="count", doc="number of leaves (2 triangles each)", min=1, max=1_000_000)
+    size: tuple[float, float] = param((0.3, 0.1), unit="scene units", doc="leaf length and width")
+    spread: float = param(2.0, unit="scene units", doc="side of the cube the leaf centres fill", gt=0.0)
+    color_jitter: float = param(0.2, unit="[0,1]", doc="largest change of each colour channel", min=0.0, max=1.0)
+    seed: int = param(0, doc="seed of the placement")
+
+
 @_register("mesh")
 @dataclass(frozen=True, kw_only=True)
 class Mesh(ObjectSpec):
