@@ -24,7 +24,9 @@ from gpusim.schemes import make_scheme, scheme_names
 TARGET = 2_000_000  # fragments per second
 #: variants whose work differs from the defaults (packing doubles the atomic chains, sort-blend runs a queue)
 VARIANTS = [("freepipe-mdts", {"packing": True, "alpha": 0.5}), ("kbuffer", {"mode": "sort-blend"}),
-            ("kbuffer", {"order": "centroid", "batch": 1000}), ("freepipe-abuffer", {"sort": "bitonic"})]
+            ("kbuffer", {"order": "centroid", "batch": 1000}), ("freepipe-abuffer", {"sort": "bitonic"}),
+            ("tfss", {"leading_zero_elimination": "fixed", "section_bytes": 14}),
+            ("lucidraster", {"depth_filter": 12}), ("lucidraster", {"alpha_threshold": True})]
 
 
 def best_of(fn, repeat):

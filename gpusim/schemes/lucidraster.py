@@ -126,7 +126,8 @@ class LucidRaster(Scheme):
                 by_arrival = by_arrival[~skipped[by_arrival]]
                 emitted = emit_order(pix, g.key, by_arrival, self.depth_filter)
         ep, ek = pix[emitted], g.key[emitted]
-        descent = np.r_[False, (ep[1:] == ep[:-1]) & (ek[1:] < ek[:-1])]
+        descent = np.zeros(len(ep), bool)
+        descent[1:] = (ep[1:] == ep[:-1]) & (ek[1:] < ek[:-1])
         invalid_pixels = int(len(np.unique(ep[descent])))
 
         image = composite_runs(ep, trace.rgba[emitted, :3], g.alpha[emitted], P, trace.background,

@@ -172,8 +172,7 @@ class TFSS(Scheme):
         # read (Figure 3-9), one thread per pixel
         read_order = stored_order[pl.kept[stored_order]]
         rpix, rstart, rcount = read_runs(pix, read_order, P)
-        nsec = np.zeros(P, np.int64)
-        np.add.at(nsec, pix[openers], 1)
+        nsec = np.bincount(pix[openers], minlength=P)
         if self.read_scan == "all":
             plan.add(2, "load", "ssa_table", P, 1, lambda i, s: i * SA, SA)
         else:
