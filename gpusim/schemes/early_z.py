@@ -25,9 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gpusim.metrics.composite import run_starts
 from gpusim.schemes.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.opstream import OpPlan
-from gpusim.schemes.result import Structure
+from gpusim.schemes.result import Stat, Structure
 from gpusim.schemes.storage import DEPTH_BYTES
 
 _FAR = np.uint64(1) << np.uint64(32)     # "no opaque fragment yet": behind every key
@@ -45,6 +46,13 @@ class EarlyZ:
     culled_at_arrival: int
     occluded_after_store: int
 
+    def stats(self, occluded_fate: str = "read, not blended") -> dict[str, Stat]:
+        """The two discard counts every scheme on this pipeline reports."""
+        return {"culled_at_arrival": Stat(self.culled_at_arrival, "fragments", "transparent fragments behind "
+                                          "the nearest opaque one so far (not stored)"),
+                "occluded_after_store": Stat(self.occluded_after_store, "fragments",
+                                             f"stored fragments a later opaque fragment hid ({occluded_fate})")}
+
 
 def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_bytes: int,
             colour_round) -> EarlyZ:
@@ -57,9 +65,10 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
     before = np.empty(g.n, np.uint64)
     before[order] = np.minimum(segment_running_min_before(pix[order], okey[order]), _FAR)
     stored = ~opaque & (key < before)
+    # nearest opaque depth of the whole frame: the running minimum through each pixel's last fragment
+    last = order[np.r_[run_starts(pix[order])[1:], g.n] - 1] if g.n else order
     final = np.full(trace.pixel_count, _FAR)
-    if opaque.any():
-        np.minimum.at(final, pix[opaque], key[opaque].astype(np.uint64))
+    final[pix[last]] = np.minimum(np.minimum(before[last], okey[last]), _FAR)
     visible = stored & (key < final[pix])
     opaque_rgb = np.empty((trace.pixel_count, 3), np.float32)
     opaque_rgb[:] = colour_round(trace.background.astype(np.float32))
@@ -91,6 +100,18 @@ def pipeline_structures(trace, names: list[str]) -> list[str]:
 def storage_bytes(structures: list[Structure]) -> int:
     """Bytes of the transparent storage system alone (what Table 4-2 counts)."""
     return sum(s.allocated_bytes for s in structures if s.name not in PIPELINE)
+
+
+def resolve_writes(plan: OpPlan, pass_index: int, pix: np.ndarray, visible: np.ndarray, pixel_count: int,
+                   framebuffer_bytes: int) -> np.ndarray:
+    """Read-pass frame-buffer load (opaque colour) and store (result) per pixel that blends; blended per pixel."""
+    blended = np.bincount(pix[visible], minlength=pixel_count)
+    bpix = np.flatnonzero(blended)
+    plan.add(pass_index, "load", "framebuffer", bpix, 1, lambda i, s: bpix[i] * framebuffer_bytes,
+             framebuffer_bytes)
+    plan.add(pass_index, "store", "framebuffer", bpix, 1, lambda i, s: bpix[i] * framebuffer_bytes,
+             framebuffer_bytes, dep=True)
+    return blended
 
 
 def pipeline_buffers(pixel_count: int, framebuffer_bytes: int, colour_bits: int, ez: EarlyZ,

@@ -67,20 +67,25 @@ class PixelGroups:
     def distinct_rank(self) -> np.ndarray:
         """0-based rank of each fragment's depth among the distinct depths of its pixel."""
         order = self.by_depth
-        pix, key = self.pix[order], self.key[order]
-        new_pixel = np.r_[True, pix[1:] != pix[:-1]]
-        new_value = new_pixel | np.r_[True, key[1:] != key[:-1]]
-        steps = np.cumsum(new_value) - 1                    # distinct values so far, global
-        start = np.flatnonzero(new_pixel)
-        first = np.repeat(steps[start], np.diff(np.r_[start, len(order)]))
         rank = np.empty(self.n, np.int64)
-        rank[order] = steps - first
+        rank[order] = distinct_rank_in_runs(self.pix[order], self.key[order])
         return rank
 
     def _rank_in_runs(self, order: np.ndarray) -> np.ndarray:
         rank = np.empty(self.n, np.int64)
         rank[order] = rank_in_runs(self.pix[order])
         return rank
+
+
+def distinct_rank_in_runs(pix_sorted: np.ndarray, key_sorted: np.ndarray) -> np.ndarray:
+    """For grouped runs with keys in order: the 0-based rank of each key among its run's distinct keys."""
+    if len(pix_sorted) == 0:
+        return np.zeros(0, np.int64)
+    new_pixel = np.r_[True, pix_sorted[1:] != pix_sorted[:-1]]
+    new_value = new_pixel | np.r_[True, key_sorted[1:] != key_sorted[:-1]]
+    steps = np.cumsum(new_value) - 1                    # distinct values so far, global
+    start = np.flatnonzero(new_pixel)
+    return steps - np.repeat(steps[start], np.diff(np.r_[start, len(pix_sorted)]))
 
 
 def segment_running_min_before(pix_sorted: np.ndarray, key_sorted: np.ndarray) -> np.ndarray:

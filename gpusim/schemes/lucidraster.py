@@ -41,6 +41,7 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.metrics.composite import composite_runs, runs_by_length
+from gpusim.schemes.arrays import rank_in_runs
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.depth_filter import emit_order
 from gpusim.schemes.depthkey import depth_key
@@ -62,9 +63,8 @@ ALPHA_LIMIT = 1.0 - 1.0 / 128
 def sorted_arrival(pix, centroid_key, tb_block, tb_tri, tb_of_frag):
     """Per-block rank of each tri-block (front to back) and the pixel arrival order it gives."""
     order = np.lexsort((tb_tri, centroid_key, tb_block))
-    start = np.flatnonzero(np.r_[True, tb_block[order][1:] != tb_block[order][:-1]])
     rank = np.empty(len(order), np.int64)
-    rank[order] = np.arange(len(order)) - np.repeat(start, np.diff(np.r_[start, len(order)]))
+    rank[order] = rank_in_runs(tb_block[order])
     frag_rank = rank[tb_of_frag]
     return frag_rank, np.lexsort((frag_rank, pix))
 
@@ -175,10 +175,8 @@ class LucidRaster(Scheme):
         n, pix = len(trace), g.pix
         # position of each sample in its half-block's processing order
         hb_order = np.lexsort((trace.x, -trace.y.astype(np.int64), frag_rank, half_block))
-        hb_sorted = half_block[hb_order]
-        start = np.flatnonzero(np.r_[True, hb_sorted[1:] != hb_sorted[:-1]])
         pos = np.empty(n, np.int64)
-        pos[hb_order] = np.arange(n) - np.repeat(start, np.diff(np.r_[start, n]))
+        pos[hb_order] = rank_in_runs(half_block[hb_order])
         cross = crossing_arrival(pix, emitted, steps, g.alpha, g.count)
         first = np.cumsum(g.count) - g.count
         has = cross >= 0
@@ -222,8 +220,9 @@ class LucidRaster(Scheme):
         thb = np.bincount(counts["thb_bin"], minlength=B)
         thb_order, thb_first = grouped(counts["thb_bin"], B)
         covered = counts["covered"]
-        cov_order, cov_first = grouped(grid.bin_of_pixel(covered), B)
-        px = np.bincount(grid.bin_of_pixel(covered), minlength=B)
+        cov_bin = grid.bin_of_pixel(covered)
+        cov_order, cov_first = grouped(cov_bin, B)
+        px = np.bincount(cov_bin, minlength=B)
         plan.add(4, "load", "bin_offsets", bins, 1, lambda i, s: bins[i] * 4, 4)
         plan.add(4, "load", "bin_tri_lists", bins, bin_tris[bins], lambda i, s: (first[bins[i]] + s) * 4, 4,
                  dep=True)

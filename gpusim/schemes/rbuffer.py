@@ -41,24 +41,18 @@ from gpusim.schemes.arrays import pixel_key
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
 from gpusim.schemes.fold import fold
-from gpusim.schemes.groups import PixelGroups
+from gpusim.schemes.groups import PixelGroups, distinct_rank_in_runs
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.weights import unorm
+from gpusim.schemes.weights import unorm_rounder
 
 
 def far_rank(pix: np.ndarray, key: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """For fragments ``idx``: how many distinct depths of their pixel (among ``idx``) lie behind them."""
-    order = idx[np.argsort(pixel_key(pix[idx], ~key[idx]), kind="stable")]
-    p, k = pix[order], key[order]
-    new_pixel = np.r_[True, p[1:] != p[:-1]]
-    new_value = new_pixel | np.r_[True, k[1:] != k[:-1]]
-    steps = np.cumsum(new_value) - 1
-    start = np.flatnonzero(new_pixel)
-    first = np.repeat(steps[start], np.diff(np.r_[start, len(order)]))
-    rank = np.empty(len(pix), np.int64)
-    rank[order] = steps - first
-    return rank[idx]
+    order = np.argsort(pixel_key(pix[idx], ~key[idx]), kind="stable")
+    rank = np.empty(len(idx), np.int64)
+    rank[order] = distinct_rank_in_runs(pix[idx][order], key[idx][order])
+    return rank
 
 
 def fifo_sequence(pos: np.ndarray, pass_no: np.ndarray, members: np.ndarray) -> np.ndarray:
@@ -94,8 +88,7 @@ class RBuffer(Scheme):
         n, P, pix = len(trace), trace.pixel_count, g.pix
         SF, ZB, bits = self.fragment_bytes, self.depth_bytes, self.colour_bits
         fb_bytes = math.ceil(4 * bits / 8)
-        top = np.float32((1 << bits) - 1)
-        rnd = lambda v: (unorm(v, bits) / top).astype(np.float32)  # noqa: E731
+        rnd = unorm_rounder(bits)
 
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment")]
         plan = OpPlan(passes, pipeline_structures(trace, ["r_buffer", "second_z_buffer", "state_memory"]))
@@ -157,10 +150,7 @@ class RBuffer(Scheme):
             "storage_system_bytes": Stat(storage, "bytes", "Table 4-2 total: R-buffer + second z-buffer + "
                                                            "state memory"),
             "stored_fragments": Stat(n_f, "fragments", "N_f: transparent fragments written to the FIFO"),
-            "culled_at_arrival": Stat(ez.culled_at_arrival, "fragments",
-                                      "transparent fragments behind the nearest opaque one so far (not stored)"),
-            "occluded_after_store": Stat(ez.occluded_after_store, "fragments",
-                                         "stored fragments a later opaque fragment hid (dropped in pass 1)"),
+            **ez.stats("dropped in pass 1"),
             "tie_blends": Stat(int(np.count_nonzero(same)), "fragments",
                                "fragments blended in the same pass as an equal-depth one (FIFO order)"),
         }

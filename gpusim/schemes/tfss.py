@@ -54,42 +54,16 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
+from gpusim.schemes.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
+                                    storage_bytes)
 from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.leading_zeros import LzeMode, colour_bits, length_field_bits
+from gpusim.schemes.leading_zeros import LzeMode, length_field_bits
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 from gpusim.schemes.sections import SectionIndex, place, read_runs
 from gpusim.schemes.storage import DEPTH_BYTES
-from gpusim.schemes.weights import composite_weighted, premultiply, unorm
-
-Ties = Literal["arrival", "eq4"]
-
-
-@dataclass(frozen=True)
-class StoredColours:
-    """Integer colours of the stored fragments and what they cost in bits."""
-
-    weighted: np.ndarray     # (N, 3) float32: a_i c_i as the read process sees it
-    alpha: np.ndarray        # (N,) float32
-    bits: np.ndarray         # (N,) int64: stored bits of each fragment
-
-
-def stored_colours(rgba: np.ndarray, bits: int, fragment_bits: int, lze: str) -> StoredColours:
-    """Quantise to ``bits`` per channel, compress (leading_zeros) and give the blended values back."""
-    top = np.float32((1 << bits) - 1)
-    c = unorm(rgba[:, :3], bits)
-    a = unorm(rgba[:, 3], bits)
-    alpha = a.astype(np.float32) / top
-    if lze == "off":
-        weighted = (c.astype(np.float32) / top) * alpha[:, None]
-        rgb_bits = np.full(len(c), 3 * bits, np.int64)
-    else:
-        pm = premultiply(c, a, bits)
-        weighted = pm.astype(np.float32) / top
-        rgb_bits = colour_bits(pm, bits, lze)
-    return StoredColours(weighted, alpha, fragment_bits - 3 * bits + rgb_bits)
-
+from gpusim.schemes.weights import (Ties, check_fragment_bytes, stored_colours, unorm_rounder,
+                                    weighted_image)
 
 @register("tfss")
 @dataclass(frozen=True)
@@ -110,10 +84,7 @@ class TFSS(Scheme):
     ties: Ties = param("arrival", doc="equal depths in the weights: arrival order, or Eq. 4 as printed")
 
     def __post_init__(self) -> None:
-        need = 8 * DEPTH_BYTES + 4 * self.colour_bits
-        if 8 * self.fragment_bytes < need:
-            raise ValueError(f"fragment_bytes {self.fragment_bytes} cannot hold a 32-bit depth and four "
-                             f"{self.colour_bits}-bit channels ({math.ceil(need / 8)} bytes needed)")
+        check_fragment_bytes(self.fragment_bytes, self.colour_bits)
 
     @property
     def m_section(self) -> int:
@@ -125,14 +96,13 @@ class TFSS(Scheme):
         SA, M, L, bits = self.address_bytes, self.m_section, self.l_num, self.colour_bits
         lze = self.leading_zero_elimination
         fb_bytes = math.ceil(4 * bits / 8)
-        top = np.float32((1 << bits) - 1)
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
                   Pass("read", "fullscreen", "pixel")]
         names = pipeline_structures(trace, ["ssa_table", "t_buffer", "nsa_table"])
         names += ["length_table"] if lze != "off" else []
         plan = OpPlan(passes, names)
         plan.add(0, "store", "ssa_table", P, 1, lambda i, s: i * SA, SA)
-        ez = early_z(trace, g, plan, 1, fb_bytes, lambda v: (unorm(v, bits) / top).astype(np.float32))
+        ez = early_z(trace, g, plan, 1, fb_bytes, unorm_rounder(bits))
 
         cand = np.flatnonzero(ez.stored)
         col = stored_colours(trace.rgba[cand], bits, 8 * self.fragment_bytes, lze)
@@ -186,18 +156,8 @@ class TFSS(Scheme):
         plan.add(2, "load", "t_buffer", rpix, rcount, lambda i, s: t_off[read_order[rstart[i] + s]],
                  lambda i, s: t_bytes[read_order[rstart[i] + s]], dep=True)
         vis = ez.visible & pl.kept
-        blended = np.bincount(pix[vis], minlength=P)
-        bpix = np.flatnonzero(blended)
-        plan.add(2, "load", "framebuffer", bpix, 1, lambda i, s: bpix[i] * fb_bytes, fb_bytes)
-        plan.add(2, "store", "framebuffer", bpix, 1, lambda i, s: bpix[i] * fb_bytes, fb_bytes, dep=True)
-
-        # image: Eq. 2-4 over the visible stored fragments
-        order = g.by_depth[vis[g.by_depth]]
-        weighted = np.zeros((n, 3), np.float32)
-        alpha = np.zeros(n, np.float32)
-        weighted[cand], alpha[cand] = col.weighted, col.alpha
-        image = composite_weighted(pix[order], g.key[order], weighted[order], alpha[order], ez.opaque_rgb,
-                                   self.ties).reshape(trace.height, trace.width, 3)
+        blended = resolve_writes(plan, 2, pix, vis, P, fb_bytes)
+        image, order = weighted_image(trace, g, vis, cand, col, ez.opaque_rgb, self.ties)
 
         stored_bits = int(frag_bits[kept].sum())
         struct = [
@@ -218,10 +178,7 @@ class TFSS(Scheme):
                                                            "(+ Length Table with leading-0s elimination)"),
             "transparent_pixels": Stat(len(rpix), "pixels", "pixels with at least one stored fragment"),
             "stored_fragments": Stat(len(kept), "fragments", "transparent fragments written to the T-buffer"),
-            "culled_at_arrival": Stat(ez.culled_at_arrival, "fragments",
-                                      "transparent fragments behind the nearest opaque one so far (not stored)"),
-            "occluded_after_store": Stat(ez.occluded_after_store, "fragments",
-                                         "stored fragments a later opaque fragment hid (read, not blended)"),
+            **ez.stats(),
             "section_fill": Stat(round(stored_bits / (8 * M * n_s), 6) if n_s else 0.0, "fraction",
                                  "stored fragment bits / T-buffer bits"),
             "stored_bits_per_fragment": Stat(round(stored_bits / len(kept), 4) if len(kept) else 0.0, "bits",

@@ -27,14 +27,15 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
+from gpusim.schemes.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
+                                    storage_bytes)
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 from gpusim.schemes.sections import SectionIndex, place, read_runs
 from gpusim.schemes.storage import DEPTH_BYTES
-from gpusim.schemes.tfss import Ties, stored_colours
-from gpusim.schemes.weights import composite_weighted, unorm
+from gpusim.schemes.weights import (Ties, check_fragment_bytes, stored_colours, unorm_rounder,
+                                    weighted_image)
 
 
 @register("weight-factor")
@@ -50,10 +51,7 @@ class WeightFactor(Scheme):
     ties: Ties = param("arrival", doc="equal depths in the weights: arrival order, or Eq. 4 as printed")
 
     def __post_init__(self) -> None:
-        need = 8 * DEPTH_BYTES + 4 * self.colour_bits
-        if 8 * self.fragment_bytes < need:
-            raise ValueError(f"fragment_bytes {self.fragment_bytes} cannot hold a 32-bit depth and four "
-                             f"{self.colour_bits}-bit channels ({math.ceil(need / 8)} bytes needed)")
+        check_fragment_bytes(self.fragment_bytes, self.colour_bits)
 
     def simulate(self, trace) -> SchemeResult:
         g = PixelGroups(trace)
@@ -61,12 +59,11 @@ class WeightFactor(Scheme):
         SA, D, FB, bits = self.address_bytes, self.d_avg, self.fragment_bytes, self.colour_bits
         M = D * FB
         fb_bytes = math.ceil(4 * bits / 8)
-        top = np.float32((1 << bits) - 1)
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
                   Pass("read", "fullscreen", "pixel")]
         plan = OpPlan(passes, pipeline_structures(trace, ["m_buffer", "pointer_memory"]))
         plan.add(0, "store", "pointer_memory", P, 1, lambda i, s: i * SA, SA)
-        ez = early_z(trace, g, plan, 1, fb_bytes, lambda v: (unorm(v, bits) / top).astype(np.float32))
+        ez = early_z(trace, g, plan, 1, fb_bytes, unorm_rounder(bits))
 
         stored_order = g.by_arrival[ez.stored[g.by_arrival]]
         pl = place(pix, stored_order, n, D)
@@ -95,19 +92,9 @@ class WeightFactor(Scheme):
         plan.add(2, "load", "pointer_memory", rpix, nsec, lambda i, s: section(rpix[i], s) * SA, SA)
         plan.add(2, "load", "m_buffer", rpix, rcount, lambda i, s: m_off[stored_order[rstart[i] + s]], FB,
                  dep=True)
-        vis = ez.visible
-        blended = np.bincount(pix[vis], minlength=P)
-        bpix = np.flatnonzero(blended)
-        plan.add(2, "load", "framebuffer", bpix, 1, lambda i, s: bpix[i] * fb_bytes, fb_bytes)
-        plan.add(2, "store", "framebuffer", bpix, 1, lambda i, s: bpix[i] * fb_bytes, fb_bytes, dep=True)
-
+        blended = resolve_writes(plan, 2, pix, ez.visible, P, fb_bytes)
         col = stored_colours(trace.rgba[kept], bits, 8 * FB, "off")
-        weighted = np.zeros((n, 3), np.float32)
-        alpha = np.zeros(n, np.float32)
-        weighted[kept], alpha[kept] = col.weighted, col.alpha
-        order = g.by_depth[vis[g.by_depth]]
-        image = composite_weighted(pix[order], g.key[order], weighted[order], alpha[order], ez.opaque_rgb,
-                                   self.ties).reshape(trace.height, trace.width, 3)
+        image, order = weighted_image(trace, g, ez.visible, kept, col, ez.opaque_rgb, self.ties)
 
         sections = P + n_a
         struct = [
@@ -122,10 +109,7 @@ class WeightFactor(Scheme):
             "storage_system_bytes": Stat(storage, "bytes", "Table 4-2 total: M-buffer + pointer memory"),
             "transparent_pixels": Stat(len(rpix), "pixels", "pixels with at least one stored fragment"),
             "stored_fragments": Stat(len(kept), "fragments", "transparent fragments written to the M-buffer"),
-            "culled_at_arrival": Stat(ez.culled_at_arrival, "fragments",
-                                      "transparent fragments behind the nearest opaque one so far (not stored)"),
-            "occluded_after_store": Stat(ez.occluded_after_store, "fragments",
-                                         "stored fragments a later opaque fragment hid (read, not blended)"),
+            **ez.stats(),
             "section_fill": Stat(round(len(kept) / (D * sections), 6), "fraction",
                                  "stored fragments / M-buffer slots"),
         }

@@ -19,15 +19,37 @@ fragment.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+from typing import Literal
+
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
+from gpusim.schemes.leading_zeros import colour_bits
+from gpusim.schemes.storage import DEPTH_BYTES
+
+Ties = Literal["arrival", "eq4"]
 
 
 def unorm(values: np.ndarray, bits: int) -> np.ndarray:
     """Values in [0, 1] as ``bits``-bit unsigned normalised integers (round to nearest), int64."""
     top = (1 << bits) - 1
     return np.rint(np.clip(np.asarray(values, np.float64), 0.0, 1.0) * top).astype(np.int64)
+
+
+def unorm_rounder(bits: int):
+    """Round float32 values to what a ``bits``-bit unorm channel holds (float32 back)."""
+    top = np.float32((1 << bits) - 1)
+    return lambda v: (unorm(v, bits) / top).astype(np.float32)
+
+
+def check_fragment_bytes(fragment_bytes: int, bits: int) -> None:
+    """ValueError unless a stored fragment has room for a 32-bit depth and four ``bits``-bit channels."""
+    need = 8 * DEPTH_BYTES + 4 * bits
+    if 8 * fragment_bytes < need:
+        raise ValueError(f"fragment_bytes {fragment_bytes} cannot hold a 32-bit depth and four "
+                         f"{bits}-bit channels ({math.ceil(need / 8)} bytes needed)")
 
 
 def premultiply(colour: np.ndarray, alpha: np.ndarray, bits: int) -> np.ndarray:
@@ -67,3 +89,43 @@ def composite_weighted(pix: np.ndarray, key: np.ndarray, weighted: np.ndarray, a
         trans[:m] *= np.float32(1.0) - alpha[idx]
     image[covered] = colour + trans[:, None] * image[covered]
     return image
+
+
+@dataclass(frozen=True)
+class StoredColours:
+    """Integer colours of the stored fragments and what they cost in bits."""
+
+    weighted: np.ndarray     # (N, 3) float32: a_i c_i as the read process sees it
+    alpha: np.ndarray        # (N,) float32
+    bits: np.ndarray         # (N,) int64: stored bits of each fragment
+
+
+def stored_colours(rgba: np.ndarray, bits: int, fragment_bits: int, lze: str) -> StoredColours:
+    """Quantise to ``bits`` per channel, compress (gpusim.schemes.leading_zeros), give the blended values back."""
+    top = np.float32((1 << bits) - 1)
+    c = unorm(rgba[:, :3], bits)
+    a = unorm(rgba[:, 3], bits)
+    alpha = a.astype(np.float32) / top
+    if lze == "off":
+        weighted = (c.astype(np.float32) / top) * alpha[:, None]
+        rgb_bits = np.full(len(c), 3 * bits, np.int64)
+    else:
+        pm = premultiply(c, a, bits)
+        weighted = pm.astype(np.float32) / top
+        rgb_bits = colour_bits(pm, bits, lze)
+    return StoredColours(weighted, alpha, fragment_bits - 3 * bits + rgb_bits)
+
+
+def weighted_image(trace, g, visible: np.ndarray, stored: np.ndarray, colours: StoredColours,
+                   base: np.ndarray, ties: str) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 2-4 image of the ``visible`` fragments over ``base``: ((H, W, 3) image, fragments in depth order).
+
+    ``colours`` belong to the fragments ``stored`` (trace indices, a superset of the visible ones).
+    """
+    n = len(trace)
+    weighted = np.zeros((n, 3), np.float32)
+    alpha = np.zeros(n, np.float32)
+    weighted[stored], alpha[stored] = colours.weighted, colours.alpha
+    order = g.by_depth[visible[g.by_depth]]
+    image = composite_weighted(g.pix[order], g.key[order], weighted[order], alpha[order], base, ties)
+    return image.reshape(trace.height, trace.width, 3), order
