@@ -200,3 +200,10 @@ def test_thesis_fidelity_and_parameter_errors(random_trace):
         make_scheme("tfss", {"fragment_bytes": 4})
     with pytest.raises(ConfigError, match="leading_zero_elimination: 'lz4' is not a valid choice"):
         make_scheme("tfss", {"leading_zero_elimination": "lz4"})
+
+
+def test_histogram_scene_rejects_impossible_counts():
+    with pytest.raises(ConfigError, match="names 400,000 pixels but the screen has 307,200"):
+        load_scene("thesis-frame60", ["transparent_per_pixel=[400000]"])
+    with pytest.raises(ConfigError, match="fewer than the transparent fragments"):
+        load_scene("thesis-frame60", ["fragments=1000"])
