@@ -8,6 +8,7 @@ from typing import Any
 from gpusim.config import parse_override
 from gpusim.errors import ConfigError, GpusimError
 from gpusim.hw import FIDELITIES
+from gpusim.hw.gpu import load_gpu
 from gpusim.metrics import composite_exact, image_error
 from gpusim.schemes import make_scheme
 from gpusim.schemes.result import SchemeResult, Stat
@@ -26,8 +27,13 @@ def parse_params(items: list[str] | None) -> dict[str, Any]:
 
 
 def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = None,
-           fidelity: str | None = None) -> tuple[SchemeResult, dict, Any, Any]:
-    """Run ``scheme`` (and the timing model ``fidelity``, if given); returns (result, record, image, reference)."""
+           fidelity: str | None = None, gpu=None) -> tuple[SchemeResult, dict, Any, Any]:
+    """Run ``scheme`` (and the timing model ``fidelity`` on ``gpu``, if given).
+
+    Returns (result, record, image, reference). With a timing level that
+    replays RMW hazards, ``result.extras["timed_image"]`` holds the image in
+    event order (with its artifacts).
+    """
     if fidelity is not None and fidelity not in FIDELITIES:
         raise ConfigError(f"--fidelity {fidelity}: unknown fidelity level (valid: {', '.join(FIDELITIES)})")
     model = make_scheme(scheme, params, where=f"--scheme {scheme} --param")
@@ -61,7 +67,13 @@ def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = No
         "wall_seconds": wall,
     }
     if fidelity is not None:
+        if gpu is None and fidelity != "thesis":
+            gpu = load_gpu()
         start = time.perf_counter()
-        timing = FIDELITIES[fidelity](result)
+        timing, timed_image = FIDELITIES[fidelity](result, trace, gpu, reference)
         record["timing"] = timing | {"wall_seconds": time.perf_counter() - start}
+        if gpu is not None:
+            record["gpu_config"] = gpu.to_dict()
+        if timed_image is not None:
+            result.extras["timed_image"] = timed_image
     return result, record, result.image, reference

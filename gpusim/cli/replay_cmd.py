@@ -9,7 +9,7 @@ import numpy as np
 
 from gpusim.atomic_io import write_text_atomic
 from gpusim.cli.common import jsonable, print_json
-from gpusim.hw import FIDELITIES
+from gpusim.hw import DEFAULT_GPU, FIDELITIES, gpu_presets, load_gpu
 from gpusim.replay import parse_params, replay
 from gpusim.schemes import scheme_names
 from gpusim.trace_io import load_trace
@@ -25,8 +25,14 @@ def add_parser(sub) -> None:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="scheme parameter (repeatable), e.g. --param layers=8")
     p.add_argument("--fidelity", choices=sorted(FIDELITIES), metavar="LEVEL",
-                   help="also run a timing model: " + ", ".join(sorted(FIDELITIES))
-                        + " (thesis: seed 003 section 4.3.2, for tfss, r-buffer and weight-factor)")
+                   help="also run a timing model: analytic (bounds from work/throughput), sampled (event model "
+                        "on a sample of screen tiles), full (event model on everything, RMW hazards replayed "
+                        "into the image) or thesis (seed 003 section 4.3.2, for tfss, r-buffer and weight-factor)")
+    p.add_argument("--gpu", metavar="PRESET|FILE", default=None,
+                   help=f"GPU for the timing model: a preset ({', '.join(gpu_presets())}) or a .toml file "
+                        f"(default {DEFAULT_GPU})")
+    p.add_argument("--gpu-set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a GPU config key (repeatable), e.g. --gpu-set rop.reorder_entries=16")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="write image.png, difference.png and stats.json to DIR")
@@ -40,9 +46,10 @@ def _mib(n: int) -> str:
 def run(args) -> int:
     trace = load_trace(args.trace)
     params = parse_params(args.param)
-    result, record, image, reference = replay(trace, args.scheme, params, args.fidelity)
+    gpu = load_gpu(args.gpu, args.gpu_set) if (args.fidelity or args.gpu or args.gpu_set) else None
+    result, record, image, reference = replay(trace, args.scheme, params, args.fidelity, gpu)
     if args.output:
-        _write_outputs(Path(args.output), record, image, reference)
+        _write_outputs(Path(args.output), record, image, reference, result.extras.get("timed_image"))
     if args.json:
         print_json(record)
         return 0
@@ -65,20 +72,43 @@ def run(args) -> int:
     print(f"error        rmse {e['rmse']:.3g}, psnr {psnr} dB, {e['differing_pixels']:,} pixels differ "
           f"by more than one 8-bit step")
     if "timing" in record:
-        t = record["timing"]
-        print(f"cycles       {t['cycles']:,} ({t['fidelity']}: {t['memory_cycles']:,} memory + "
-              f"{t['compute_cycles']:,} compute, {t['compute_formula']} per pixel)")
+        _print_timing(record["timing"])
     print(f"wall         {record['wall_seconds']:.3f} s (functional model)")
     if args.output:
         print(f"wrote        {args.output}/image.png, difference.png, stats.json")
     return 0
 
 
-def _write_outputs(out: Path, record: dict, image, reference) -> None:
+def _print_timing(t: dict) -> None:
+    if t["fidelity"] == "thesis":
+        print(f"cycles       {t['cycles']:,} ({t['fidelity']}: {t['memory_cycles']:,} memory + "
+              f"{t['compute_cycles']:,} compute, {t['compute_formula']} per pixel)")
+        return
+    print(f"cycles       {t['cycles']:,} ({t['fidelity']} on {t['gpu']}: {t['microseconds']:,.1f} us; "
+          f"{t['instructions']:,} warp instructions, {t['wall_seconds']:.2f} s)")
+    for p in t["passes"][:12]:
+        extra = f"  bound: {p['bound']}" if "bound" in p else ""
+        print(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")
+    if len(t["passes"]) > 12:
+        print(f"  pass       ... {len(t['passes']) - 12} more")
+    for name, u in t["units"].items():
+        print(f"  unit       {name:<10} utilisation mean {u['utilisation_mean']:.1%}"
+              + (f", max {u['utilisation_max']:.1%}" if "utilisation_max" in u else ""))
+    if t.get("rmw_hazards") is not None:
+        line = f"{t['rmw_hazards']:,} fragments read an obsolete value ({t['rmw_hazard_pixels']:,} pixels)"
+        if "rmw_image_error" in t:
+            e = t["rmw_image_error"]
+            line += f"; image in event order: rmse {e['rmse']:.3g}, {e['differing_pixels']:,} pixels differ"
+        print(f"rmw hazards  {line}")
+
+
+def _write_outputs(out: Path, record: dict, image, reference, timed=None) -> None:
     from gpusim.report.images import save_heatmap_png, save_image_png
 
     diff = np.abs(np.asarray(image) - reference).max(axis=2)
     save_image_png(image, out / "image.png")
+    if timed is not None:
+        save_image_png(timed, out / "image-timed.png")
     save_heatmap_png(diff, out / "difference.png", title=f"{record['scheme']}: |image - reference| (max channel)",
                      label="absolute difference")
     write_text_atomic(out / "stats.json", json.dumps(jsonable(record), indent=2) + "\n")

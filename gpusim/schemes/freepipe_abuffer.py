@@ -53,7 +53,7 @@ class FreePipeABuffer(Scheme):
         kept_idx = np.flatnonzero(kept)
         kept_n = np.minimum(g.count, L)
 
-        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
+        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment", software=True),
                   Pass("resolve", "fullscreen", "pixel")]
         structures = ["counter", "depth_array", "colour_array"]
         plan = OpPlan(passes, structures)

@@ -78,9 +78,9 @@ class FreePipeMDTS(Scheme):
             values = {"depth_array": g.key}
         cb = 4 if self.packing else COLOUR_BYTES[self.colour_format]
 
-        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment")]
+        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment", software=True)]
         if not self.packing:
-            passes.append(Pass("colour", "geometry", "fragment"))
+            passes.append(Pass("colour", "geometry", "fragment", software=True))
         passes.append(Pass("resolve", "fullscreen", "pixel"))
         resolve_pass = len(passes) - 1
         structures = ["depth_array", "colour_array"]

@@ -33,7 +33,18 @@ blend       a fixed-function ROP read-modify-write of a framebuffer value,
             committed in submission order by the ROP (never a hazard)
 depth_test  a ROP depth test: read, compare and conditional write of a depth
 stencil     a ROP stencil test and update of one sample's stencil value
+program_blend
+            a programmable-blender invocation at the ROP (k-buffer proposal 2,
+            seed 004 section 3.1.2): reads and writes ``bytes`` of the pixel's
+            entries, committed in submission order like ``blend``
+scoreboard  fragment dispatch through the scoreboard (k-buffer proposal 1,
+            seed 004 section 3.1.1): the thread waits until no fragment of its
+            pixel's cell is in flight and holds the cell until its last
+            operation completes; no memory traffic (``bytes`` 0)
 =========== ====================================================================
+
+A pass marked ``software`` runs as a compute kernel (FreePipe's software
+pipeline); the timing model may then map one thread to each triangle.
 """
 
 from __future__ import annotations
@@ -47,7 +58,7 @@ import pandas as pd
 from gpusim.errors import GpusimError
 
 OPS = ("load", "store", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
-       "rmw_read", "rmw_write", "blend", "depth_test", "stencil")
+       "rmw_read", "rmw_write", "blend", "depth_test", "stencil", "program_blend", "scoreboard")
 PASS_KINDS = ("clear", "geometry", "fullscreen", "flush", "buffer")
 THREAD_KINDS = ("fragment", "pixel", "entry", "none")
 BASE_ALIGN = 4096          # bytes
@@ -56,11 +67,16 @@ DEFAULT_MAX_OPS = 200_000_000
 
 @dataclass(frozen=True)
 class Pass:
-    """One pass of a scheme: ``kind`` in PASS_KINDS, ``threads`` in THREAD_KINDS."""
+    """One pass of a scheme: ``kind`` in PASS_KINDS, ``threads`` in THREAD_KINDS.
+
+    ``software``: the pass is a compute kernel (a software rasterizer), not the
+    graphics pipeline.
+    """
 
     name: str
     kind: str
     threads: str
+    software: bool = False
 
     def __post_init__(self):
         if self.kind not in PASS_KINDS or self.threads not in THREAD_KINDS:

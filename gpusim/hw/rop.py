@@ -1,0 +1,157 @@
+"""ROP units with a reorder buffer, and the programmable blender (seed 004 sections 3.1-3.2).
+
+Fixed-function raster operations (``blend``, ``depth_test``, ``stencil``) and
+programmable-blender invocations (``program_blend``, k-buffer proposal 2) go to
+ROP unit ``(address // memory.interleave_bytes) % rop.units``. Operations on
+one address (one pixel's value) commit in submission order (primitive order),
+which keeps blending correct however the shader cores interleave fragments:
+an operation that arrives before the previous one on its address waits in the
+unit's reorder buffer (``rop.reorder_entries``); an operation that can commit
+at once needs no entry. When the buffer is full, the warp issuing into it
+stalls (the core stalls) until an entry frees.
+
+A unit commits one operation at a time: ``commit = max(arrival, previous
+commit on the address, unit free) + service``, with a service of
+``1 / rop.ops_per_cycle`` cycles for fixed-function operations and
+``blender.cycles_per_op + bytes / blender.bytes_per_cycle`` for a blender
+program. A depth or stencil result reaches the core ``rop.latency`` +
+interconnect cycles after commit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gpusim.hw.lower import ROP, Program
+from gpusim.hw.units import FP, Unit, UnitStat, fp_cost
+from gpusim.schemes.opstream import OPS
+
+PROGRAM_BLEND = OPS.index("program_blend")
+
+
+class RopUnits(Unit):
+    name = "rop"
+
+    def __init__(self, gpu, program: Program, env):
+        units = gpu.rop.units
+        super().__init__(units)
+        self.gpu, self.env = gpu, env
+        self.icn, self.lat = gpu.memory.interconnect_latency, gpu.rop.latency
+        self.C = gpu.rop.reorder_entries
+        wis = np.flatnonzero(program.wi_class == ROP)
+        counts = np.diff(program.row_start)[wis]
+        rows = (np.repeat(program.row_start[wis], counts)
+                + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+        n = len(rows)
+        addr = program.address[rows]
+        unit = (addr // gpu.memory.interleave_bytes) % units
+        # the previous operation on the same address, in submission order
+        order = np.lexsort((program.seq[rows], addr))
+        pred = np.full(n, -1, np.int64)
+        same = np.r_[False, addr[order][1:] == addr[order][:-1]] if n else np.zeros(0, bool)
+        pred[order[same]] = order[np.flatnonzero(same) - 1]
+        fixed = fp_cost(1, gpu.rop.ops_per_cycle)
+        b = gpu.blender
+        prog_blend = program.op[rows] == PROGRAM_BLEND
+        service = np.where(prog_blend, b.cycles_per_op * FP + np.ceil(program.nbytes[rows] * FP
+                                                                        / b.bytes_per_cycle).astype(np.int64),
+                           fixed)
+        self.blender_ops = int(prog_blend.sum())
+        self.busy_fp = np.bincount(unit, weights=service, minlength=units).astype(np.int64).tolist()
+        self.requests = np.bincount(unit, minlength=units).tolist()
+        self.unit, self.pred, self.service = unit.tolist(), pred.tolist(), service.tolist()
+        self.commit = [-1] * n                   # cycle, once known
+        self.arrive = [-1] * n
+        self.free = [0] * units                  # sub-cycles
+        self.held = [0] * units                  # reorder-buffer entries in use
+        self.max_held = [0] * units
+        self.stalls = 0
+        self.waiting_on: dict[int, list[int]] = {}
+        self.commit_events: dict[int, object] = {}
+        self.space = [None] * units
+        self.drain = 0
+        self.off = np.concatenate([[0], np.cumsum(counts)]).tolist()
+        self.first = {wi: j for j, wi in enumerate(wis.tolist())}
+        self.placed: dict[int, int] = {}          # instruction -> lanes placed so far
+
+    def access(self, wi: int, t: int, produces: bool):
+        """(cycle the warp may go on, cycle the result is back) or an event to wait for and retry."""
+        j = self.first[wi]
+        a, b = self.off[j], self.off[j + 1]
+        done = self.placed.get(wi, a)
+        for i in range(done, b):
+            p = self.pred[i]
+            if p >= 0 and self.commit[p] < 0:             # must wait for the previous op on its address
+                u = self.unit[i]
+                if self.held[u] >= self.C:                # full: the warp stalls
+                    self.placed[wi] = i
+                    self.stalls += 1
+                    if self.space[u] is None:
+                        self.space[u] = self.env.event()
+                    return self.space[u]
+                self.held[u] += 1
+                self.max_held[u] = max(self.max_held[u], self.held[u])
+                self.arrive[i] = self.env.now + self.icn
+                self.waiting_on.setdefault(p, []).append(i)
+            else:
+                self.arrive[i] = self.env.now + self.icn
+                self._commit(i)
+        self.placed[wi] = b
+        if not produces:
+            return t, t
+        value = t
+        for i in range(a, b):
+            if self.commit[i] < 0:
+                ev = self.commit_events.get(i)
+                if ev is None:
+                    ev = self.commit_events[i] = self.env.event()
+                return ev
+            value = max(value, self.commit[i] + self.lat + self.icn)
+        return t, value
+
+    def _commit(self, i: int) -> None:
+        stack = [i]
+        while stack:
+            i = stack.pop()
+            u, p = self.unit[i], self.pred[i]
+            start = max(self.arrive[i] * FP, self.free[u], (self.commit[p] * FP) if p >= 0 else 0)
+            end = start + self.service[i]
+            self.free[u] = end
+            self.commit[i] = c = -(-end // FP)
+            if c + self.lat > self.drain:
+                self.drain = c + self.lat
+            ev = self.commit_events.pop(i, None)
+            if ev is not None:
+                ev.succeed()
+            for k in self.waiting_on.pop(i, ()):
+                uk = self.unit[k]
+                self.held[uk] -= 1
+                if self.space[uk] is not None:
+                    self.space[uk].succeed()
+                    self.space[uk] = None
+                stack.append(k)
+
+    def blocked(self) -> list[str]:
+        """What the units are stuck on (no-progress diagnosis)."""
+        out = []
+        for u in range(self.instances):
+            if self.space[u] is not None or self.held[u]:
+                out.append(f"rop[{u}] reorder buffer: {self.held[u]}/{self.C} entries hold operations waiting for "
+                           f"an earlier operation on their pixel that has not arrived"
+                           + ("; a warp waits for a free entry" if self.space[u] is not None else ""))
+        if self.commit_events:
+            out.append(f"rop: {len(self.commit_events)} warp(s) wait for a depth/stencil result")
+        return out[:4] + ([f"... {len(out) - 4} more"] if len(out) > 4 else [])
+
+    def stats(self, total_cycles):
+        rows = super().stats(total_cycles)
+        for u in range(self.instances):
+            rows.append(UnitStat(self.name, "max_reorder_occupancy", self.max_held[u], "entries",
+                                 "most operations waiting in the reorder buffer", u))
+        rows.append(UnitStat(self.name, "stalls", self.stalls, "stalls", "warp instructions stalled by a full buffer"))
+        return rows
+
+    def summary(self, total_cycles):
+        return super().summary(total_cycles) | {"reorder_entries": self.C, "stalls": self.stalls,
+                                                "max_reorder_occupancy": int(max(self.max_held)),
+                                                "blender_ops": self.blender_ops}

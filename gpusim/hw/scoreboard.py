@@ -1,0 +1,71 @@
+"""Scoreboard at fragment dispatch (k-buffer proposal 1, seed 004 section 3.1.1).
+
+A coarse image of the fragments in flight: cells of ``scoreboard.granularity``
+x ``granularity`` pixels. A warp's ``scoreboard`` instruction dispatches it
+only when none of its lanes' cells is held by a warp still in flight and the
+scoreboard has room for its cells (``scoreboard.entries``); the warp then holds
+its cells until its last operation completes. Dispatch packs no two fragments
+of one cell into a warp (gpusim.hw.lower), so a warp never waits for itself.
+Fragments whose cell is busy wait (the proposal's holding buffer is not
+modelled: the warp stalls, which is the proposal's behaviour once that buffer
+overflows).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gpusim.hw.lower import SCOREBOARD, Program, scoreboard_cell
+from gpusim.hw.units import Unit, UnitStat
+
+
+class Scoreboard(Unit):
+    name = "scoreboard"
+
+    def __init__(self, gpu, program: Program, width: int, env):
+        super().__init__(1)
+        self.env = env
+        self.entries = gpu.scoreboard.entries
+        self.held: set[int] = set()
+        self.changed = env.event()
+        self.stalls = 0
+        self.max_held = 0
+        self.table = {}
+        for wi in np.flatnonzero(program.wi_class == SCOREBOARD).tolist():
+            r = program.rows(wi)
+            self.table[wi] = scoreboard_cell(program.cell_pixel[r], width, gpu.scoreboard.granularity).tolist()
+
+    def acquire(self, wi: int):
+        """The warp's cells if it may dispatch now, else an event to wait for and retry."""
+        cells = self.table[wi]
+        if any(c in self.held for c in cells) or len(self.held) + len(cells) > self.entries:
+            self.stalls += 1
+            return self.changed
+        self.held.update(cells)
+        self.requests[0] += len(cells)
+        self.max_held = max(self.max_held, len(self.held))
+        return cells
+
+    def release(self, cells: list[int], at: int) -> None:
+        """Free ``cells`` at cycle ``at`` (the warp's last operation completes)."""
+        def done(_event):
+            self.held.difference_update(cells)
+            old, self.changed = self.changed, self.env.event()
+            old.succeed()
+        self.env.timeout(max(0, at - self.env.now)).callbacks.append(done)
+
+    def blocked(self) -> list[str]:
+        if self.changed.callbacks:
+            return [f"scoreboard: {len(self.held)}/{self.entries} cells held; "
+                    f"{len(self.changed.callbacks)} warp(s) wait for a cell to be released"]
+        return []
+
+    def stats(self, total_cycles):
+        return [UnitStat(self.name, "dispatches", self.requests[0], "fragments", "fragments dispatched"),
+                UnitStat(self.name, "stalls", self.stalls, "attempts", "dispatch attempts held back"),
+                UnitStat(self.name, "max_held", self.max_held, "cells", "most cells in flight at once")]
+
+    def summary(self, total_cycles):
+        return {"instances": 1, "requests": self.requests[0], "stalls": self.stalls, "max_held": self.max_held,
+                "entries": self.entries, "busy_cycles": 0.0, "utilisation_mean": self.max_held / self.entries,
+                "utilisation_max": self.max_held / self.entries}
