@@ -48,6 +48,17 @@ class CoreConfig:
 
 
 @dataclass(frozen=True)
+class RasterConfig:
+    """Primitive processing: the fixed-function rasterizer, or a software one in the threads."""
+
+    triangles_per_cycle: float = param(0.46, unit="triangles/cycle", doc="fixed-function setup and raster "
+                                       "rate: a graphics-pipeline geometry pass sends every triangle through "
+                                       "it, and a warp starts once its fragments' triangles are rasterized", gt=0)
+    setup_instructions: int = param(40, unit="instructions", doc="per-triangle setup a software-rasterizer "
+                                    "thread issues before its fragments (triangle thread mapping)", min=0)
+
+
+@dataclass(frozen=True)
 class MemoryConfig:
     """Memory partitions: address interleaving and the core-partition interconnect."""
 
@@ -145,6 +156,7 @@ class GpuConfig:
     name: str = param("custom", doc="machine name")
     source: str = param("", doc="where the figures come from")
     core: CoreConfig = field(default_factory=CoreConfig)
+    raster: RasterConfig = field(default_factory=RasterConfig)
     memory: MemoryConfig = field(default_factory=MemoryConfig)
     l2: L2Config = field(default_factory=L2Config)
     dram: DramConfig = field(default_factory=DramConfig)

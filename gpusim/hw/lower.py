@@ -43,8 +43,9 @@ class Workload:
     """
 
     def __init__(self, stream: OpStream | None, width: int, height: int, frag_pixel: np.ndarray,
-                 frag_prim: np.ndarray, result=None):
+                 frag_prim: np.ndarray, result=None, triangles: int | None = None):
         self._stream, self.result = stream, result
+        self.triangles = int(frag_prim.max()) + 1 if triangles is None and len(frag_prim) else (triangles or 0)
         self.width, self.height = width, height
         self.frag_pixel, self.frag_prim = frag_pixel, frag_prim
 
@@ -58,7 +59,8 @@ class Workload:
     def of(cls, result, trace, stream: OpStream | None = None) -> "Workload":
         order = result.submission if result.submission is not None else np.arange(len(trace))
         return cls(stream, trace.width, trace.height, trace.pixel_ids()[order].astype(np.int64),
-                   trace.prim[order].astype(np.int64), result)
+                   trace.prim[order].astype(np.int64), result,
+                   int(trace.prim.max()) + 1 if len(trace) else 0)
 
 
 @dataclass
@@ -71,6 +73,9 @@ class PassProgram:
     wi_start: np.ndarray           # per warp, plus a final end
     lanes: int                     # threads of the pass
     flush_warps: int = 0           # ALU-only warps of a flush pass (a full-screen quad, no memory ops)
+    warp_ready: np.ndarray | None = None   # cycles after the pass start each warp's triangles are rasterized
+    min_cycles: int = 0            # the rasterizer's time for all the pass's triangles
+    setup_cycles: int = 0          # issue cycles of software triangle setup at each warp's start
 
     @property
     def warps(self) -> int:
@@ -182,6 +187,7 @@ def lower(work: Workload, gpu, keep: np.ndarray | None = None) -> Program:
         order = np.lexsort((lane_id, code, pos, warp))
         w_, p_, c_ = warp[order], pos[order], code[order]
         new_wi = np.r_[True, (w_[1:] != w_[:-1]) | (p_[1:] != p_[:-1]) | (c_[1:] != c_[:-1])] if n else new_lane[:0]
+    thread0 = thread                                   # lane order (lane_first indexes it)
     rows, thread, cell_pixel = rows[order], thread[order], cell_pixel[order]
     row_start = np.append(np.flatnonzero(new_wi), n)
     first = row_start[:-1]
@@ -191,11 +197,26 @@ def lower(work: Workload, gpu, keep: np.ndarray | None = None) -> Program:
     wi_pass = pass_of[order[first]]
     warp_wi_start = np.searchsorted(wi_warp, np.arange(int(pass_warp0[-1]) + 1))
     passes = []
+    rate = gpu.raster.triangles_per_cycle
+    lane_prim = np.full(len(lane_first), -1, np.int64)
+    fr = np.flatnonzero(fragment_pass[lane_pass])
+    if len(fr) and len(work.frag_prim):
+        lane_prim[fr] = work.frag_prim[thread0[lane_first[fr]]]
     for i, p in enumerate(s.passes):
         w0, w1 = int(pass_warp0[i]), int(pass_warp0[i + 1])
         lanes = int(pass_first_lane[i + 1] - pass_first_lane[i])
         flush = -(-work.width * work.height // ws) if p.kind == "flush" else 0
-        passes.append(PassProgram(i, p.name, p.kind, warp_wi_start[w0:w1 + 1], lanes, flush))
+        pp = PassProgram(i, p.name, p.kind, warp_wi_start[w0:w1 + 1], lanes, flush)
+        mode = _mapping(gpu, p)
+        if mode == "fragment":         # the fixed-function rasterizer feeds the warps in triangle order
+            sel = lane_pass == i
+            ready = np.zeros(w1 - w0, np.int64)
+            if sel.any():
+                np.maximum.at(ready, warp_in_pass[sel], np.ceil((lane_prim[sel] + 1) / rate).astype(np.int64))
+            pp.warp_ready, pp.min_cycles = ready, int(np.ceil(work.triangles / rate))
+        elif mode == "triangle":
+            pp.setup_cycles = gpu.raster.setup_instructions * gpu.core.issue_cycles
+        passes.append(pp)
     return Program(passes, row_start, wi_op, OP_CLASS[wi_op], dep, OP_PRODUCES[wi_op], wi_warp, wi_pass,
                    s.op[rows], s.address[rows].astype(np.int64), s.bytes[rows].astype(np.int64), thread,
                    rows, cell_pixel, s.structure[rows])

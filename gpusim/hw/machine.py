@@ -12,6 +12,13 @@ serving a request is arithmetic on the unit's free time, so an instruction
 costs one simpy event unless it must wait for another warp (a reorder buffer,
 the scoreboard).
 
+Geometry passes of the graphics pipeline get their fragments from a
+fixed-function rasterizer (``raster.triangles_per_cycle``): a warp starts once
+the triangles of its fragments are rasterized, and the pass lasts at least as
+long as rasterizing every triangle (each depth-peeling pass pays it again). A
+software rasterizer (the ``triangle`` mapping) instead issues
+``raster.setup_instructions`` per triangle in its thread.
+
 Passes are barriers: a pass ends when its last operation has completed
 (stores landed, the ROPs drained). A ``flush`` pass (the k-buffer's batching
 heuristic) drains the pipeline (``core.pipeline_latency``) and runs a
@@ -114,15 +121,20 @@ class Machine:
                     for _ in range(min(self.gpu.core.warps_per_sm, len(queue))):
                         procs.append(env.process(self._slot(p, sm, queue)))
                 yield env.all_of(procs)
-                end = max(self._done, self.rop.drain if self.rop is not None else 0)
+                end = max(self._done, self.rop.drain if self.rop is not None else 0, start + p.min_cycles)
                 if end > env.now:
                     yield env.timeout(end - env.now)
             self.pass_cycles.append(int(env.now - start))
         self.finished = True
 
     def _slot(self, p, sm, queue):
+        start = self.env.now
         while queue:
             w = queue.popleft()
+            if p.warp_ready is not None and start + int(p.warp_ready[w]) > self.env.now:
+                yield self.env.timeout(start + int(p.warp_ready[w]) - self.env.now)   # rasterizer not there yet
+            if p.setup_cycles:             # software triangle setup holds the SM's issue port
+                self.sm_free[sm] = max(self.sm_free[sm], self.env.now) + p.setup_cycles
             yield from self._warp(p, int(p.wi_start[w]), int(p.wi_start[w + 1]), sm, w)
 
     def _warp(self, p, wi0, wi1, sm, w):

@@ -110,11 +110,20 @@ class Partitions:
         rows = np.repeat(prog.row_start[wis], counts) + (np.arange(counts.sum()) -
                                                           np.repeat(np.cumsum(counts) - counts, counts))
         wi_of = np.repeat(wis, counts)
-        seg = prog.address[rows] // m.segment_bytes
+        S = m.segment_bytes
+        addr, nbytes = prog.address[rows], np.maximum(prog.nbytes[rows], 1)
+        seg = addr // S
+        span = (addr + nbytes - 1) // S - seg + 1
+        if (span > 1).any():               # an access wider than a segment touches several
+            k = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
+            wi_of, addr, nbytes = np.repeat(wi_of, span), np.repeat(addr, span), np.repeat(nbytes, span)
+            seg = np.repeat(seg, span) + k
+            lo, hi = np.maximum(addr, seg * S), np.minimum(addr + nbytes, (seg + 1) * S)
+            nbytes = hi - lo
         # one request per (instruction, segment): sorted by instruction, then segment
         key, inv = np.unique(wi_of * (1 << 36) + seg, return_inverse=True)
         req_wi, req_seg = key >> 36, key & ((1 << 36) - 1)
-        touched = np.bincount(inv.ravel(), weights=prog.nbytes[rows], minlength=len(key)).astype(np.int64)
+        touched = np.bincount(inv.ravel(), weights=nbytes, minlength=len(key)).astype(np.int64)
         req_bytes = np.minimum(-(-touched // SECTOR) * SECTOR, max(m.segment_bytes, SECTOR))
         req_addr = req_seg * m.segment_bytes
         req_part = (req_addr // m.interleave_bytes) % P
@@ -161,7 +170,9 @@ class Partitions:
             end = 0
             rmw = self.rmw.get(wi) if self.rmw else None
             if rmw is not None:
-                starts = {kp[j]: max(arrive, free[kp[j]]) for j in range(a, b)}
+                starts = [0] * len(free)
+                for j in range(a, b):
+                    starts[kp[j]] = max(arrive, free[kp[j]])
             for j in range(a, b):
                 p = kp[j]
                 e = free[p]
@@ -174,7 +185,9 @@ class Partitions:
             done = -(-end // FP) + self.dram_lat
         if rmw is not None:
             r, parts = rmw
-            self.sample[r] = [-(-starts[p] // FP) for p in parts.tolist()]
+            if isinstance(starts, dict):
+                starts = [starts.get(p, 0) for p in range(len(self.dram_free))]
+            self.sample[r] = -(-np.asarray(starts, np.int64)[parts] // FP)
         return done + self.icn
 
     def _l2_access(self, entry, write, arrive, starts) -> int:

@@ -97,9 +97,10 @@ class RopUnits(Unit):
                 self.arrive[i] = self.env.now + self.icn
                 self._commit(i)
         self.placed[wi] = b
+        go = max(t, self.env.now)          # a warp stalled by a full buffer goes on once it is placed
         if not produces:
-            return t, t
-        value = t
+            return go, go
+        value = go
         for i in range(a, b):
             if self.commit[i] < 0:
                 ev = self.commit_events.get(i)
@@ -107,7 +108,7 @@ class RopUnits(Unit):
                     ev = self.commit_events[i] = self.env.event()
                 return ev
             value = max(value, self.commit[i] + self.lat + self.icn)
-        return t, value
+        return go, value
 
     def _commit(self, i: int) -> None:
         stack = [i]

@@ -13,6 +13,8 @@ overflows).
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from gpusim.hw.lower import SCOREBOARD, Program, scoreboard_cell
@@ -26,8 +28,8 @@ class Scoreboard(Unit):
         super().__init__(1)
         self.env = env
         self.entries = gpu.scoreboard.entries
-        self.held: set[int] = set()
-        self.changed = env.event()
+        self.held: dict[int, object] = {}       # cell -> event of its release (None until someone waits)
+        self.room: deque = deque()              # warps waiting for room in a full scoreboard, in order
         self.stalls = 0
         self.max_held = 0
         self.table = {}
@@ -38,26 +40,46 @@ class Scoreboard(Unit):
     def acquire(self, wi: int):
         """The warp's cells if it may dispatch now, else an event to wait for and retry."""
         cells = self.table[wi]
-        if any(c in self.held for c in cells) or len(self.held) + len(cells) > self.entries:
+        held = self.held
+        for c in cells:
+            if c in held:
+                self.stalls += 1
+                ev = held[c]
+                if ev is None:
+                    ev = held[c] = self.env.event()
+                self._wake_next()
+                return ev
+        if len(held) + len(cells) > self.entries:
             self.stalls += 1
-            return self.changed
-        self.held.update(cells)
+            ev = self.env.event()
+            self.room.append(ev)
+            return ev
+        for c in cells:
+            held[c] = None
         self.requests[0] += len(cells)
-        self.max_held = max(self.max_held, len(self.held))
+        self.max_held = max(self.max_held, len(held))
+        self._wake_next()
         return cells
+
+    def _wake_next(self) -> None:
+        """Let the next warp waiting for room retry (one at a time: no stampede)."""
+        if self.room and len(self.held) < self.entries:
+            self.room.popleft().succeed()
 
     def release(self, cells: list[int], at: int) -> None:
         """Free ``cells`` at cycle ``at`` (the warp's last operation completes)."""
         def done(_event):
-            self.held.difference_update(cells)
-            old, self.changed = self.changed, self.env.event()
-            old.succeed()
+            for c in cells:
+                ev = self.held.pop(c)
+                if ev is not None:
+                    ev.succeed()
+            self._wake_next()
         self.env.timeout(max(0, at - self.env.now)).callbacks.append(done)
 
     def blocked(self) -> list[str]:
-        if self.changed.callbacks:
-            return [f"scoreboard: {len(self.held)}/{self.entries} cells held; "
-                    f"{len(self.changed.callbacks)} warp(s) wait for a cell to be released"]
+        waiting = sum(1 for ev in self.held.values() if ev is not None) + len(self.room)
+        if waiting:
+            return [f"scoreboard: {len(self.held)}/{self.entries} cells held; warps wait on {waiting} of them"]
         return []
 
     def stats(self, total_cycles):

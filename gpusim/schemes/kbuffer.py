@@ -25,6 +25,18 @@ sorts primitives front to back by centroid depth (see gpusim.schemes.reorder);
 (a ``flush`` pass with no memory operations) between. Both leave this
 functional result unchanged (peel) or improve it (sort-blend, by ordering);
 their cost and their effect on hazards are the timing model's to measure.
+
+Hardware (``hw``, section 3.1):
+
+* ``texture-rmw`` (current hardware, section 3.2): k ``rmw_read`` and k
+  ``rmw_write`` per fragment through the texture path; hazards possible.
+* ``scoreboard`` (proposal 1): the same, behind a ``scoreboard`` dispatch
+  operation that holds a fragment back while its pixel is in flight.
+* ``blender`` (proposal 2): one ``program_blend`` per fragment at the ROP,
+  reading and writing the pixel's k entries in submission order.
+
+``extras["rmw_replay"]`` replays the program in the timing model's event order
+(gpusim.schemes.kbuffer_replay) so the timed image shows the hazards' artifacts.
 """
 
 from __future__ import annotations
@@ -39,6 +51,7 @@ from gpusim.schemes.arrays import entry_index, smallest_per_pixel
 from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.depth_filter import emit_order
 from gpusim.schemes.groups import PixelGroups
+from gpusim.schemes.kbuffer_replay import make_replay
 from gpusim.schemes.opstream import OpPlan, Pass
 from gpusim.schemes.reorder import batch_index, centroid_order, permuted
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
@@ -57,6 +70,9 @@ class KBuffer(Scheme):
     colour_format: ColourFormat = param("rgba32f", doc="entry colour format (the paper's FP32 MRTs)")
     order: Literal["submission", "centroid"] = param("submission", doc="primitive order (centroid: sort heuristic)")
     batch: int = param(0, unit="primitives", doc="primitives per batch with a flush between (0: no batching)", min=0)
+    hw: Literal["texture-rmw", "scoreboard", "blender"] = param(
+        "texture-rmw", doc="where the RMW runs: texture reads in the shader (current hardware), behind a "
+                           "dispatch scoreboard (proposal 1), or in a programmable blender (proposal 2)")
 
     def simulate(self, trace) -> SchemeResult:
         n, P, k = len(trace), trace.pixel_count, self.k
@@ -90,13 +106,20 @@ class KBuffer(Scheme):
                      FRAMEBUFFER_BYTES)
         frags = n
         at = lambda i, s: entry_index(pix[i], s, k, P, "layer-major") * entry_bytes  # noqa: E731  (k MRT planes)
-        plan.add(frag_pass, "rmw_read", "kbuffer", frags, k, at, entry_bytes)
-        if blend:
-            fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
-            plan.add(frag_pass, "rmw_read", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES)
-        plan.add(frag_pass, "rmw_write", "kbuffer", frags, k, at, entry_bytes, dep=True)
-        if blend:
-            plan.add(frag_pass, "rmw_write", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES, dep=True)
+        if self.hw == "blender":
+            program_bytes = k * entry_bytes + (FRAMEBUFFER_BYTES if blend else 0)
+            plan.add(frag_pass, "program_blend", "kbuffer", frags, 1, lambda i, s: pix[i] * entry_bytes,
+                     program_bytes)
+        else:
+            if self.hw == "scoreboard":
+                plan.add(frag_pass, "scoreboard", "kbuffer", frags, 1, lambda i, s: pix[i] * entry_bytes, 0)
+            plan.add(frag_pass, "rmw_read", "kbuffer", frags, k, at, entry_bytes, dep=self.hw == "scoreboard")
+            if blend:
+                fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
+                plan.add(frag_pass, "rmw_read", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES)
+            plan.add(frag_pass, "rmw_write", "kbuffer", frags, k, at, entry_bytes, dep=True)
+            if blend:
+                plan.add(frag_pass, "rmw_write", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES, dep=True)
         pixels = P
         plan.add(resolve, "load", "kbuffer", pixels, k,
                  lambda i, s: entry_index(i, s, k, P, "layer-major") * entry_bytes, entry_bytes)
@@ -122,8 +145,11 @@ class KBuffer(Scheme):
         if blend:
             struct.append(Structure("framebuffer", FRAMEBUFFER_BYTES, P, g.covered, "RGBA32F blend target (MRT)"))
         dropped = n - kept_count
+        extras = {}
+        if self.hw != "blender":
+            extras["rmw_replay"] = make_replay(t, pix, g.key, k, blend, self.colour_format, order)
         return SchemeResult(self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
                             dropped_fragments=int(dropped),
                             overflowed_pixels=0 if blend else int(np.count_nonzero(g.count > k)),
                             lists=CapturedLists(pix[order], submission[order]), stats=stats,
-                            submission=submission)
+                            submission=submission, extras=extras)
