@@ -15,6 +15,8 @@ largest of
 * atomic: operations over all atomic units, and the hottest address
   (operations on one word serialize at ``same_address_cycles``);
 * rop: ROP service cycles of the busiest unit;
+* raster: every triangle through the fixed-function rasterizer (graphics
+  pipeline geometry passes), or software setup on the SMs (triangle mapping);
 
 plus one round trip of the slowest unit the pass uses. Imbalance across
 partitions beyond the hottest address, queueing and L2 hits are not modelled
@@ -27,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD
+from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, _mapping
 from gpusim.hw.machine import flush_cycles
 from gpusim.hw.memory import SECTOR
 from gpusim.schemes.opstream import OPS, _Range
@@ -150,6 +152,11 @@ def analytic_timing(result, work, gpu) -> dict:
             "atomic_address": hottest[p] * gpu.atomic.same_address_cycles,
             "rop": float(rop_unit[p].max()),
         }
+        mapping = _mapping(gpu, pk)
+        if mapping == "fragment":          # the fixed-function rasterizer sees every triangle
+            bounds["raster"] = work.triangles / gpu.raster.triangles_per_cycle
+        elif mapping == "triangle":        # software setup on the SMs
+            bounds["issue"] += np.ceil(n_warps / min(c.sms, n_warps)) * gpu.raster.setup_instructions * c.issue_cycles
         limit = max(bounds, key=bounds.get)
         cyc = int(np.ceil(bounds[limit])) + max(lat[u] for u in used[p])
         passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": n_warps, "bound": limit})

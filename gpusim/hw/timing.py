@@ -3,8 +3,9 @@
 * ``full``: the event model (gpusim.hw.machine) on every operation.
 * ``sampled``: the event model on the operations of a random sample of
   non-empty screen tiles (``sample.tile``, ``sample.fraction``, ``sample.seed``)
-  and of the same share of threads without a pixel (clear passes); each pass's
-  cycles are scaled by its operations in all / in the sample.
+  and of the same share of threads without a pixel (clear passes), on a
+  machine whose rasterizer is sped up by the same share; each pass's cycles
+  are scaled by its operations in all / in the sample.
 * ``analytic``: per pass, the largest of the units' work / throughput bounds
   (issue ports, DRAM channels, atomic units and their hottest address, ROPs)
   and the warps' latency-chain bound, plus one round trip; no events.
@@ -17,6 +18,7 @@ hazards, and the units built (a unit no operation reaches is not built).
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -109,7 +111,11 @@ def tile_sample(work: Workload, gpu) -> tuple[np.ndarray, dict]:
 def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict, None]:
     start = time.perf_counter()
     keep, info = tile_sample(work, gpu)
-    rec, _ = run_full(work, gpu, keep=keep)
+    # the sample gets its share of the rasterizer, so a raster-bound pass scales back to the whole
+    share = max(1, int(keep.sum())) / max(1, len(work.stream))
+    sample_gpu = replace(gpu, raster=replace(gpu.raster, triangles_per_cycle=gpu.raster.triangles_per_cycle / share))
+    rec, _ = run_full(work, sample_gpu, keep=keep)
+    rec["gpu"] = gpu.name
     scale = info.pop("scale")
     for p in rec["passes"]:
         idx = [i for i, q in enumerate(work.stream.passes) if q.name == p["name"]]

@@ -1,0 +1,113 @@
+"""The timing model end to end: relative results of the papers, hazards, fidelity levels, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from gpusim.cli import main
+from gpusim.hw import load_gpu
+from gpusim.replay import replay
+from gpusim.scene import load_scene, trace_scene
+
+
+@pytest.fixture(scope="module")
+def nested(tmp_path_factory):
+    """Ten nested spheres at 96x96: depth complexity 20, small triangles (FreePipe's meshes)."""
+    scene, base = load_scene("nested-spheres")
+    return trace_scene(scene, base)
+
+
+@pytest.fixture(scope="module")
+def runs(nested):
+    gpu = load_gpu("gtx280")
+    out = {}
+    for name, scheme, params in [("abuffer", "freepipe-abuffer", {}), ("mdts", "freepipe-mdts", {}),
+                                 ("peel", "depth-peeling", {}), ("kb", "kbuffer", {"k": 16}),
+                                 ("kb_heur", "kbuffer", {"k": 16, "order": "centroid", "batch": 32}),
+                                 ("kb_sb", "kbuffer", {"k": 16, "hw": "scoreboard"}),
+                                 ("kb_blend", "kbuffer", {"k": 16, "hw": "blender"})]:
+        result, record, _, _ = replay(nested, scheme, params, "full", gpu)
+        out[name] = (result, record["timing"])
+    return out
+
+
+def test_freepipe_table3_orderings(runs, nested):
+    c = {k: v[1]["cycles"] for k, v in runs.items()}
+    depth = int(nested.depth_complexity().max())
+    assert depth == 20
+    assert c["abuffer"] < c["mdts"] < c["peel"]
+    # depth peeling pays a geometry pass per layer: roughly the depth complexity over the A-buffer
+    assert depth / 2 <= c["peel"] / c["abuffer"] <= 2 * depth
+    assert c["peel"] / c["mdts"] > 2
+
+
+def test_kbuffer_table1_orderings_and_hazards(runs):
+    c = {k: v[1]["cycles"] for k, v in runs.items()}
+    h = {k: v[1]["rmw_hazards"] for k, v in runs.items()}
+    assert c["kb"] < c["peel"]                 # single pass beats multi-pass
+    assert c["kb_heur"] > c["kb"]              # the heuristics cost (flushes)
+    assert h["kb"] > 100 and h["kb_heur"] < h["kb"] / 10
+    assert h["kb_sb"] == 0 and h["kb_blend"] == 0
+    assert c["kb_sb"] > c["kb"]                # proposal 1 serializes pixels
+    for k in ("abuffer", "mdts", "peel"):
+        assert h[k] == 0                       # atomics and ROPs: no hazards by construction
+
+
+def test_hazards_show_in_the_timed_image(runs):
+    result, t = runs["kb"]
+    assert t["rmw_replay"]["lost_entries"] > 0
+    assert "timed_image" in result.extras
+    functional = runs["kb_sb"][1]
+    assert functional["rmw_replay"]["lost_entries"] == 0
+    assert t["rmw_image_error"]["rmse"] > functional["rmw_image_error"]["rmse"]
+
+
+def test_units_not_reached_are_not_built(runs):
+    assert runs["abuffer"][1]["units_built"] == ["dram", "atomic"]
+    assert runs["peel"][1]["units_built"] == ["dram", "rop"]
+    assert "atomic" not in runs["kb"][1]["units"] and "rop" not in runs["kb"][1]["units"]
+    assert runs["kb_blend"][1]["units"]["rop"]["blender_ops"] > 0
+    assert "scoreboard" in runs["kb_sb"][1]["units_built"]
+
+
+def test_full_model_is_deterministic(nested):
+    gpu = load_gpu("gtx280")
+    a = replay(nested, "kbuffer", {"k": 8}, "full", gpu)[1]["timing"]
+    b = replay(nested, "kbuffer", {"k": 8}, "full", gpu)[1]["timing"]
+    for rec in (a, b):
+        for key in ("wall_seconds", "event_seconds"):
+            rec.pop(key)
+    assert a == b
+
+
+def test_analytic_and_sampled_estimate_the_full_model(nested, runs):
+    gpu = load_gpu("gtx280", ["sample.fraction=0.5"])
+    for name, scheme, params in [("abuffer", "freepipe-abuffer", {}), ("peel", "depth-peeling", {})]:
+        full = runs[name][1]["cycles"]
+        for level in ("analytic", "sampled"):
+            t = replay(nested, scheme, params, level, gpu)[1]["timing"]
+            assert t["fidelity"] == level and isinstance(t["cycles"], int)
+            assert full / 4 < t["cycles"] < full * 4, (name, level, t["cycles"], full)
+    t = replay(nested, "depth-peeling", {}, "analytic", gpu)[1]["timing"]
+    assert t["rmw_hazards"] is None and all("bound" in p for p in t["passes"])
+
+
+def test_replay_cli_timing_json(tmp_path, nested, capsys):
+    from gpusim.trace_io import save_trace
+    path = tmp_path / "n.npz"
+    save_trace(nested, path)
+    assert main(["replay", str(path), "--scheme", "kbuffer", "--param", "k=4", "--fidelity", "full",
+                 "--gpu", "geforce7900gtx", "--json", "-o", str(tmp_path / "out")]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    t = rec["timing"]
+    for key in ("cycles", "fidelity", "rmw_hazards", "units", "wall_seconds", "passes"):
+        assert key in t
+    assert t["gpu"] == "geforce7900gtx" and rec["gpu_config"]["core"]["sms"] == 6
+    assert (tmp_path / "out" / "image-timed.png").exists()
+    assert main(["replay", str(path), "--scheme", "kbuffer", "--fidelity", "full", "--gpu", "nope"]) != 0
+    assert "unknown GPU preset" in capsys.readouterr().err
+    assert main(["replay", str(path), "--scheme", "kbuffer", "--fidelity", "full",
+                 "--gpu-set", "rop.units=0"]) != 0
+    assert "rop.units: must be >= 1" in capsys.readouterr().err
