@@ -35,14 +35,34 @@ from gpusim.hw.memory import SECTOR
 from gpusim.schemes.opstream import OPS, _Range
 
 
+def _uniq_inv(a: np.ndarray):
+    """Sorted distinct values and the inverse (fast when ``a`` is already sorted, as thread lists are)."""
+    if len(a) and np.any(a[1:] < a[:-1]):
+        order = np.argsort(a, kind="stable")
+        s = a[order]
+        new = np.r_[True, s[1:] != s[:-1]]
+        inv = np.empty(len(a), np.int64)
+        inv[order] = np.cumsum(new) - 1
+        return s[new], inv
+    new = np.r_[True, a[1:] != a[:-1]] if len(a) else np.zeros(0, bool)
+    return a[new], np.cumsum(new) - 1
+
+
+def _run_lengths(a: np.ndarray) -> np.ndarray:
+    """How often each distinct value occurs."""
+    s = np.sort(a)
+    edges = np.flatnonzero(np.r_[True, s[1:] != s[:-1], True]) if len(s) else np.zeros(1, np.int64)
+    return np.diff(edges)
+
+
 def _expand_pass(g, n):
     """(pass, lane index into g.thread, ops) per (pass, thread) of a group spanning passes."""
     i = np.repeat(np.arange(n), g.count)
     first = np.cumsum(g.count) - g.count
     seq = np.arange(len(i)) - np.repeat(first, g.count)
     p = np.asarray(g.pass_fn(i, seq), np.int64)
-    key, cnt = np.unique(p * n + i, return_counts=True)
-    return key // n, key % n, cnt
+    key, inv = _uniq_inv(p * n + i)
+    return key // n, key % n, np.bincount(inv)
 
 
 def analytic_timing(result, work, gpu) -> dict:
@@ -83,7 +103,7 @@ def analytic_timing(result, work, gpu) -> dict:
                     (c.thread_mapping == "triangle" or (c.thread_mapping == "auto" and pk.software)):
                 lanes = work.frag_prim[lanes]
             # warp instructions: lanes in order, each warp issues its busiest lane's count
-            ul, inv = np.unique(lanes, return_inverse=True)
+            ul, inv = _uniq_inv(lanes)
             per_lane = np.bincount(inv, weights=counts, minlength=len(ul))
             warp = np.arange(len(ul)) // ws
             wmax = np.zeros(int(warp[-1]) + 1 if len(warp) else 0)
@@ -97,13 +117,13 @@ def analytic_timing(result, work, gpu) -> dict:
                     g.bytes(lanes_sel, np.zeros(len(lanes_sel), np.int64))))
                 seg = addr // m.segment_bytes
                 wkey = (np.arange(len(seg)) // ws) * (1 << 36) + seg
-                requests_per_lane = len(np.unique(wkey)) / max(1, len(seg))
+                requests_per_lane = len(_run_lengths(wkey)) / max(1, len(seg))
                 req_bytes = min(max(m.segment_bytes, SECTOR),
                                 -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
                 dram_bytes[p] += ops * requests_per_lane * req_bytes
             elif cls == ATOMIC:
                 atomic_ops[p] += ops
-                _, hot = np.unique(addr, return_counts=True)
+                hot = _run_lengths(addr)
                 hottest[p] = max(hottest[p], float(hot.max()) if len(hot) else 0.0)
             elif cls == ROP:
                 unit = (addr // m.interleave_bytes) % gpu.rop.units
@@ -135,7 +155,7 @@ def analytic_timing(result, work, gpu) -> dict:
             continue
         keys = chains[p]["keys"]
         allk = np.concatenate([k for k, _ in keys])
-        ul, inv = np.unique(allk, return_inverse=True)
+        ul, inv = _uniq_inv(allk)
         lane_chain = np.bincount(inv, weights=np.concatenate([a for _, a in keys]), minlength=len(ul))
         warp = np.arange(len(ul)) // ws
         n_warps = int(warp[-1]) + 1
