@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, _mapping
+from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, thread_mapping
 from gpusim.hw.machine import flush_cycles
 from gpusim.hw.memory import SECTOR
 from gpusim.schemes.opstream import OPS, _Range
@@ -79,7 +79,7 @@ def analytic_timing(result, work, gpu) -> dict:
     hottest = np.zeros(n_pass)
     rop_unit = np.zeros((n_pass, gpu.rop.units))
     used: list[set] = [set() for _ in range(n_pass)]
-    chains: dict[int, dict] = {}
+    chains: dict[int, list] = {}          # pass -> (lanes, chain cycles) per group
     last_producer: dict[int, int | None] = {}
     waited: dict[int, bool] = {}
     for g in plan.groups:
@@ -98,9 +98,7 @@ def analytic_timing(result, work, gpu) -> dict:
             lanes, counts = thread[li[sel]], cnt[sel]
             lanes_sel = li[sel]
             used[p].add(cls)
-            pk = plan.passes[p]
-            if pk.kind == "geometry" and pk.threads == "fragment" and \
-                    (c.thread_mapping == "triangle" or (c.thread_mapping == "auto" and pk.software)):
+            if thread_mapping(gpu, plan.passes[p]) == "triangle":
                 lanes = work.frag_prim[lanes]
             # warp instructions: lanes in order, each warp issues its busiest lane's count
             ul, inv = _uniq_inv(lanes)
@@ -131,14 +129,13 @@ def analytic_timing(result, work, gpu) -> dict:
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
                 rop_unit[p] += np.bincount(unit, weights=counts * svc, minlength=gpu.rop.units)
             # dependent chains per lane
-            chain = chains.setdefault(p, {})
             add = per_lane * cost
             lp = last_producer.get(p)
             if g.dep and produces:
                 add = add + per_lane * lat[cls]
             elif g.dep and lp is not None and not waited.get(p, False):
                 add = add + lat[lp]
-            chain.setdefault("keys", []).append((ul, add))
+            chains.setdefault(p, []).append((ul, add))
             if produces:
                 last_producer[p], waited[p] = cls, False
             elif g.dep:
@@ -153,7 +150,7 @@ def analytic_timing(result, work, gpu) -> dict:
         if p not in chains:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": 0, "warps": 0, "bound": "empty"})
             continue
-        keys = chains[p]["keys"]
+        keys = chains[p]
         allk = np.concatenate([k for k, _ in keys])
         ul, inv = _uniq_inv(allk)
         lane_chain = np.bincount(inv, weights=np.concatenate([a for _, a in keys]), minlength=len(ul))
@@ -172,7 +169,7 @@ def analytic_timing(result, work, gpu) -> dict:
             "atomic_address": hottest[p] * gpu.atomic.same_address_cycles,
             "rop": float(rop_unit[p].max()),
         }
-        mapping = _mapping(gpu, pk)
+        mapping = thread_mapping(gpu, pk)
         if mapping == "fragment":          # the fixed-function rasterizer sees every triangle
             bounds["raster"] = work.triangles / gpu.raster.triangles_per_cycle
         elif mapping == "triangle":        # software setup on the SMs

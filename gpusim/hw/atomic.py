@@ -15,10 +15,12 @@ the interconnect back to the core.
 
 from __future__ import annotations
 
+from itertools import repeat
+
 import numpy as np
 
 from gpusim.hw.lower import ATOMIC, Program
-from gpusim.hw.units import FP, Unit, UnitStat
+from gpusim.hw.units import FP, Unit, UnitStat, fp_costs
 
 
 class AtomicUnits(Unit):
@@ -29,10 +31,7 @@ class AtomicUnits(Unit):
         self.gpu = gpu
         self.icn = gpu.memory.interconnect_latency
         self.free = [0] * self.instances              # sub-cycles
-        wis = np.flatnonzero(program.wi_class == ATOMIC)
-        counts = np.diff(program.row_start)[wis]
-        rows = (np.repeat(program.row_start[wis], counts)
-                + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+        wis, counts, rows = program.class_rows(ATOMIC)
         addr = program.address[rows]
         uniq, ids = np.unique(addr, return_inverse=True)
         part = (addr // gpu.memory.interleave_bytes) % self.instances
@@ -43,7 +42,7 @@ class AtomicUnits(Unit):
         cell = wi_s * P + part_s
         nops = np.bincount(cell, minlength=program.instructions * P) if len(cell) else np.zeros(0, np.int64)
         hit = np.flatnonzero(nops)
-        cost = np.maximum(1, np.ceil(nops[hit] * FP / gpu.atomic.ops_per_cycle)).astype(np.int64)
+        cost = fp_costs(nops[hit], gpu.atomic.ops_per_cycle)
         k_wi, k_p = hit // P, hit % P
         self.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
         self.requests = np.bincount(k_p, weights=nops[hit], minlength=P).astype(np.int64).tolist()
@@ -78,21 +77,14 @@ class AtomicUnits(Unit):
         free_a, sac = self.addr_free, c.same_address_cycles
         last = 0
         if type(lane_unit) is int:
-            for a in ids:                 # lanes of one address in lane order: each waits for the last
-                st = free_a[a]
-                if st < lane_unit:
-                    st = lane_unit
-                free_a[a] = st + sac
-                if st > last:
-                    last = st
-        else:
-            for a, lu in zip(ids, lane_unit):
-                st = free_a[a]
-                if st < lu:
-                    st = lu
-                free_a[a] = st + sac
-                if st > last:
-                    last = st
+            lane_unit = repeat(lane_unit)
+        for a, lu in zip(ids, lane_unit):   # lanes of one address in lane order: each waits for the last
+            st = free_a[a]
+            if st < lu:
+                st = lu
+            free_a[a] = st + sac
+            if st > last:
+                last = st
         return last + c.latency + self.icn
 
     def stats(self, total_cycles):

@@ -118,8 +118,17 @@ class Program:
     def rows(self, wi: int) -> slice:
         return slice(int(self.row_start[wi]), int(self.row_start[wi + 1]))
 
+    def class_rows(self, cls: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Instructions of unit class ``cls``, their lane counts, and their rows (instruction by instruction)."""
+        wis = np.flatnonzero(self.wi_class == cls)
+        counts = np.diff(self.row_start)[wis]
+        rows = (np.repeat(self.row_start[wis], counts)
+                + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+        return wis, counts, rows
 
-def _mapping(gpu, p) -> str:
+
+def thread_mapping(gpu, p) -> str:
+    """How a pass's threads become lanes: ``triangle``, ``fragment`` or ``thread`` (as they are)."""
     m = gpu.core.thread_mapping
     if p.kind != "geometry" or p.threads != "fragment":
         return "thread"
@@ -140,7 +149,7 @@ def lower(work: Workload, gpu, keep: np.ndarray | None = None) -> Program:
     cell_pixel = np.full(len(rows), -1, np.int64)
     if len(work.frag_pixel):
         cell_pixel[frag_rows] = work.frag_pixel[np.minimum(thread[frag_rows], len(work.frag_pixel) - 1)]
-    mapping = np.array([_mapping(gpu, p) == "triangle" for p in s.passes] + [False], bool)
+    mapping = np.array([thread_mapping(gpu, p) == "triangle" for p in s.passes] + [False], bool)
     tri_rows = mapping[pass_of]
     lane_key = thread.astype(np.int64).copy()
     if tri_rows.any():
@@ -207,7 +216,7 @@ def lower(work: Workload, gpu, keep: np.ndarray | None = None) -> Program:
         lanes = int(pass_first_lane[i + 1] - pass_first_lane[i])
         flush = -(-work.width * work.height // ws) if p.kind == "flush" else 0
         pp = PassProgram(i, p.name, p.kind, warp_wi_start[w0:w1 + 1], lanes, flush)
-        mode = _mapping(gpu, p)
+        mode = thread_mapping(gpu, p)
         if mode == "fragment":         # the fixed-function rasterizer feeds the warps in triangle order
             sel = lane_pass == i
             ready = np.zeros(w1 - w0, np.int64)

@@ -96,10 +96,7 @@ class Machine:
         env, r = self.env, self.gpu.runner
         main = env.process(self._passes())
         env.process(self._watchdog())
-        try:
-            env.run(until=main if r.max_cycles is None else env.any_of([main, env.timeout(r.max_cycles)]))
-        except NoProgress:
-            raise
+        env.run(until=env.any_of([main, env.timeout(r.max_cycles)]))    # NoProgress propagates
         if not self.finished:
             raise GpusimError(f"the run passed runner.max_cycles = {r.max_cycles:,} cycles before finishing "
                               f"(pass {len(self.pass_cycles)} of {len(self.prog.passes)}); raise "
@@ -164,25 +161,13 @@ class Machine:
             elif cls == ATOMIC:
                 done = self.atomics.access(wi, t)
             elif cls == ROP:
-                while True:
-                    res = self.rop.access(wi, t, prod_of[wi])
-                    if type(res) is tuple:
-                        break
-                    self.waiting[w] = f"warp {w} of pass '{p.name}' on SM {sm}, instruction {wi} ({self._what(wi)})"
-                    yield res
-                    del self.waiting[w]
-                    self.progress += 1
-                floor, done = res
+                floor, done = yield from self._until_answered(
+                    lambda: self.rop.access(wi, t, prod_of[wi]), w,
+                    lambda: f"warp {w} of pass '{p.name}' on SM {sm}, instruction {wi} ({self._what(wi)})")
             else:                                   # SCOREBOARD
-                while True:
-                    res = self.scoreboard.acquire(wi)
-                    if type(res) is list:
-                        break
-                    self.waiting[w] = f"warp {w} of pass '{p.name}' on SM {sm} at the scoreboard"
-                    yield res
-                    del self.waiting[w]
-                    self.progress += 1
-                cells = res
+                cells = yield from self._until_answered(
+                    lambda: self.scoreboard.acquire(wi), w,
+                    lambda: f"warp {w} of pass '{p.name}' on SM {sm} at the scoreboard")
                 done = floor = env.now
             if prod_of[wi]:
                 value_ready = done
@@ -192,6 +177,17 @@ class Machine:
             self._done = done_max
         if cells is not None:
             self.scoreboard.release(cells, done_max)
+
+    def _until_answered(self, ask, w: int, where):
+        """``ask()`` until it answers rather than handing back an event to wait on (a unit's queue)."""
+        while True:
+            res = ask()
+            if not isinstance(res, simpy.Event):
+                return res
+            self.waiting[w] = where()
+            yield res
+            del self.waiting[w]
+            self.progress += 1
 
     def _what(self, wi: int) -> str:
         r = self.prog.rows(wi)

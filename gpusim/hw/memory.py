@@ -24,7 +24,7 @@ import numpy as np
 
 from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
 from gpusim.schemes.opstream import OPS
-from gpusim.hw.units import FP, Unit, cycles, fp_cost
+from gpusim.hw.units import FP, Unit, cycles, fp_cost, fp_costs
 
 SECTOR = 32     # bytes
 
@@ -103,12 +103,9 @@ class Partitions:
         m, gpu = self.gpu.memory, self.gpu
         P = m.partitions
         self.table: list = [None] * prog.instructions
-        wis = np.flatnonzero(prog.wi_class == MEM)
+        wis, counts, rows = prog.class_rows(MEM)
         if not len(wis):
             return
-        counts = np.diff(prog.row_start)[wis]
-        rows = np.repeat(prog.row_start[wis], counts) + (np.arange(counts.sum()) -
-                                                          np.repeat(np.cumsum(counts) - counts, counts))
         wi_of = np.repeat(wis, counts)
         S = m.segment_bytes
         addr, nbytes = prog.address[rows], np.maximum(prog.nbytes[rows], 1)
@@ -139,7 +136,7 @@ class Partitions:
             nb = np.bincount(cell, weights=req_bytes, minlength=prog.instructions * P)
             nreq = np.bincount(cell, minlength=prog.instructions * P)
             hit = np.flatnonzero(nreq)
-            cost = np.maximum(1, np.ceil(nb[hit] * FP / gpu.dram.bytes_per_cycle)).astype(np.int64)
+            cost = fp_costs(nb[hit], gpu.dram.bytes_per_cycle)
             k_wi, k_p = hit // P, hit % P
             self.dram.requests = np.bincount(k_p, weights=nreq[hit], minlength=P).astype(np.int64).tolist()
             self.dram.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()

@@ -38,10 +38,7 @@ class RopUnits(Unit):
         self.gpu, self.env = gpu, env
         self.icn, self.lat = gpu.memory.interconnect_latency, gpu.rop.latency
         self.C = gpu.rop.reorder_entries
-        wis = np.flatnonzero(program.wi_class == ROP)
-        counts = np.diff(program.row_start)[wis]
-        rows = (np.repeat(program.row_start[wis], counts)
-                + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+        wis, counts, rows = program.class_rows(ROP)
         n = len(rows)
         addr = program.address[rows]
         unit = (addr // gpu.memory.interleave_bytes) % units

@@ -115,11 +115,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     share = max(1, int(keep.sum())) / max(1, len(work.stream))
     sample_gpu = replace(gpu, raster=replace(gpu.raster, triangles_per_cycle=gpu.raster.triangles_per_cycle / share))
     rec, _ = run_full(work, sample_gpu, keep=keep)
-    rec["gpu"] = gpu.name
-    scale = info.pop("scale")
-    for p in rec["passes"]:
-        idx = [i for i, q in enumerate(work.stream.passes) if q.name == p["name"]]
-        f = scale[idx[0]] if idx else 1.0
+    for p, f in zip(rec["passes"], info.pop("scale")):     # both in pass order
         p["sampled_cycles"] = p["cycles"]
         p["cycles"] = int(round(p["cycles"] * f))
     total = sum(p["cycles"] for p in rec["passes"])

@@ -13,12 +13,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 FP = 1 << 16          # sub-cycles per cycle
 
 
 def fp_cost(work: float, rate: float) -> int:
     """Sub-cycles to serve ``work`` units at ``rate`` units per cycle (at least one sub-cycle)."""
     return max(1, math.ceil(work * FP / rate))
+
+
+def fp_costs(work, rate: float):
+    """:func:`fp_cost` of an array of work amounts (int64)."""
+    return np.maximum(1, np.ceil(np.asarray(work) * FP / rate)).astype(np.int64)
 
 
 def cycles(fp: int) -> int:
