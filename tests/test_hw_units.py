@@ -21,8 +21,8 @@ SIMPLE = ["core.sms=1", "core.lanes_per_sm=32", "core.instructions_per_op=0", "c
 
 def simulate(plan: OpPlan, sizes: dict, threads: int, extra=(), width=64):
     gpu = load_gpu("gtx280", SIMPLE + list(extra))
-    stream = plan.expand(layout_bases(plan.structures, sizes))
-    work = Workload(stream, width, 64, np.zeros(threads, np.int64), np.arange(threads), triangles=0)
+    work = Workload(plan, layout_bases(plan.structures, sizes), width, 64, np.zeros(threads, np.int64),
+                    np.arange(threads), triangles=0)
     machine = Machine(gpu, lower(work, gpu), width)
     return machine.run(), machine
 

@@ -1,24 +1,35 @@
-"""Lowering an OpStream to warp instructions: what the SIMT cores execute.
+"""Lowering a scheme's operations to warp instructions: what the SIMT cores execute.
+
+The input is the scheme's :class:`~gpusim.schemes.opstream.OpPlan`, the grouped
+form of its OpStream ("these threads issue ``count`` operations ``op`` on
+``structure``", in program order). Lowering works group by group and never
+materialises the row-sorted OpStream: the rows it makes are those of the warp
+instructions, grouped by instruction.
 
 A *lane* is a thread of a pass: a fragment, a pixel or a memory entry, or, with
-the ``triangle`` thread mapping, a triangle whose thread issues its fragments'
-operations in turn (FreePipe, seed 000 section 3). A warp is ``warp_size``
-consecutive lanes in submission order; warps go to the SMs round robin. A
-*warp instruction* is the k-th operation of every lane of a warp that has one,
-split by operation and structure where lanes diverge; warps issue their
-instructions in program order.
+the ``triangle`` thread mapping, a triangle whose thread loops over its
+fragments (FreePipe, seed 000 section 3). A warp is ``warp_size`` consecutive
+lanes in submission order; warps go to the SMs round robin. Warps execute
+SIMT, group after group in program order: a group whose lanes issue
+``count`` operations is a loop of ``max(count)`` warp instructions over the
+warp's lanes, instruction ``k`` carrying the lanes with ``count > k`` (the
+others are masked off). With the triangle mapping, the thread's loop over its
+fragments is the outer loop: iteration ``j`` runs every group for the
+``j``-th fragment of each lane's triangle. So a warp's instructions run in the
+order (fragment iteration ``j``, group, ``k``).
 
-Everything here is vectorized numpy on the whole stream; the event model
-(gpusim.hw.machine) then walks warps and instructions.
+Everything here is vectorized numpy; the event model (gpusim.hw.machine) then
+walks warps and instructions.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from gpusim.schemes.opstream import OPS, OpStream
+from gpusim.errors import GpusimError
+from gpusim.schemes.opstream import DEFAULT_MAX_OPS, OPS, OpPlan, _Range
 
 MEM, ATOMIC, ROP, SCOREBOARD = 0, 1, 2, 3
 UNIT_CLASSES = ("memory", "atomic", "rop", "scoreboard")
@@ -35,32 +46,30 @@ RMW_READ, RMW_WRITE = OPS.index("rmw_read"), OPS.index("rmw_write")
 
 
 class Workload:
-    """What the hardware knows besides the stream: the screen and each fragment thread's pixel and triangle.
+    """What the hardware replays: the scheme's plan and where its structures live, the screen,
+    and each fragment thread's pixel and triangle.
 
     ``frag_pixel[t]`` and ``frag_prim[t]`` are for fragment thread ``t`` (the
-    scheme's submission order). The OpStream is expanded from the scheme's
-    plan on first use (the analytic level never expands it).
+    scheme's submission order).
     """
 
-    def __init__(self, stream: OpStream | None, width: int, height: int, frag_pixel: np.ndarray,
+    def __init__(self, plan: OpPlan, bases: dict[str, int], width: int, height: int, frag_pixel: np.ndarray,
                  frag_prim: np.ndarray, result=None, triangles: int | None = None):
-        self._stream, self.result = stream, result
+        self.plan, self.bases, self.result = plan, bases, result
         self.triangles = int(frag_prim.max()) + 1 if triangles is None and len(frag_prim) else (triangles or 0)
         self.width, self.height = width, height
-        self.frag_pixel, self.frag_prim = frag_pixel, frag_prim
-
-    @property
-    def stream(self) -> OpStream:
-        if self._stream is None:
-            self._stream = self.result.opstream()
-        return self._stream
+        self.frag_pixel = np.asarray(frag_pixel, np.int64)
+        self.frag_prim = np.asarray(frag_prim, np.int64)
 
     @classmethod
-    def of(cls, result, trace, stream: OpStream | None = None) -> "Workload":
+    def of(cls, result, trace) -> "Workload":
         order = result.submission if result.submission is not None else np.arange(len(trace))
-        return cls(stream, trace.width, trace.height, trace.pixel_ids()[order].astype(np.int64),
-                   trace.prim[order].astype(np.int64), result,
-                   int(trace.prim.max()) + 1 if len(trace) else 0)
+        return cls(result.plan, result.bases(), trace.width, trace.height, trace.pixel_ids()[order],
+                   trace.prim[order], result, int(trace.prim.max()) + 1 if len(trace) else 0)
+
+    @property
+    def operations(self) -> int:
+        return self.plan.total_ops()
 
 
 @dataclass
@@ -73,9 +82,11 @@ class PassProgram:
     wi_start: np.ndarray           # per warp, plus a final end
     lanes: int                     # threads of the pass
     flush_warps: int = 0           # ALU-only warps of a flush pass (a full-screen quad, no memory ops)
-    warp_ready: np.ndarray | None = None   # cycles after the pass start each warp's triangles are rasterized
-    min_cycles: int = 0            # the rasterizer's time for all the pass's triangles
+    warp_triangles: np.ndarray | None = None   # fixed-function rasterizer: triangles rasterized before each
+                                               # warp's fragments are all out (its last triangle + 1)
     setup_cycles: int = 0          # issue cycles of software triangle setup at each warp's start
+    operations: int = 0            # operations lowered (after any sampling)
+    operations_total: int = 0      # operations of the pass in the plan
 
     @property
     def warps(self) -> int:
@@ -84,29 +95,32 @@ class PassProgram:
 
 @dataclass
 class Program:
-    """Warp instructions of a whole run, and the rows (operations) they cover.
+    """Warp instructions of a whole run, in issue order, and the rows (operations) they carry.
 
-    Row arrays are in instruction order; instruction ``i`` covers rows
-    ``row_start[i]..row_start[i+1]-1``.
+    Instruction ``i`` carries rows ``row_lo[i]..row_hi[i]-1`` (its lanes, in
+    lane order); rows are stored instruction by instruction, though not in
+    issue order.
     """
 
     passes: list[PassProgram]
     # per instruction
-    row_start: np.ndarray
+    row_lo: np.ndarray
+    row_hi: np.ndarray
     wi_op: np.ndarray
     wi_class: np.ndarray
     wi_dep: np.ndarray
     wi_produces: np.ndarray
     wi_warp: np.ndarray            # global warp number
     wi_pass: np.ndarray
+    wi_group: np.ndarray           # the plan group the instruction comes from
+    wi_k: np.ndarray               # its iteration inside the group's loop
     # per row (operation)
     op: np.ndarray
     address: np.ndarray
     nbytes: np.ndarray
-    thread: np.ndarray
-    seq: np.ndarray                # position of the row in the OpStream (submission order)
-    cell_pixel: np.ndarray         # pixel of fragment rows (-1 elsewhere): scoreboard cells, tiles
-    structure: np.ndarray
+    thread: np.ndarray             # the scheme's thread (a fragment in submission order, a pixel, an entry)
+    frag_pixel: np.ndarray = field(repr=False, default=None)   # pixel of each fragment thread
+    triangles: int = 0             # triangles of the scene (the rasterizer's work per geometry pass)
 
     @property
     def instructions(self) -> int:
@@ -116,15 +130,23 @@ class Program:
         return set(np.unique(self.wi_class).tolist())
 
     def rows(self, wi: int) -> slice:
-        return slice(int(self.row_start[wi]), int(self.row_start[wi + 1]))
+        return slice(int(self.row_lo[wi]), int(self.row_hi[wi]))
 
     def class_rows(self, cls: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Instructions of unit class ``cls``, their lane counts, and their rows (instruction by instruction)."""
+        """Instructions of unit class ``cls`` (in issue order), their lane counts, and their rows (instruction
+        by instruction)."""
         wis = np.flatnonzero(self.wi_class == cls)
-        counts = np.diff(self.row_start)[wis]
-        rows = (np.repeat(self.row_start[wis], counts)
-                + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
-        return wis, counts, rows
+        return (wis,) + _ranges(self.row_lo[wis], self.row_hi[wis])
+
+
+def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lengths of ``lo[i]..hi[i]`` and the concatenation of those ranges."""
+    counts = hi - lo
+    if not len(counts):
+        return counts, np.zeros(0, np.int64)
+    total = int(counts.sum())
+    starts = np.cumsum(counts) - counts
+    return counts, np.repeat(lo - starts, counts) + np.arange(total)
 
 
 def thread_mapping(gpu, p) -> str:
@@ -137,98 +159,193 @@ def thread_mapping(gpu, p) -> str:
     return m
 
 
-def lower(work: Workload, gpu, keep: np.ndarray | None = None) -> Program:
-    """Warp instructions of ``work.stream`` on ``gpu``; ``keep`` selects rows (the sampled fidelity)."""
-    s = work.stream
-    ws = gpu.core.warp_size
-    rows = np.arange(len(s)) if keep is None else np.flatnonzero(keep)
-    pass_of = s.pass_index[rows].astype(np.int64)
-    thread = s.thread[rows]
-    fragment_pass = np.array([p.threads == "fragment" for p in s.passes] + [False], bool)
-    frag_rows = fragment_pass[pass_of]
-    cell_pixel = np.full(len(rows), -1, np.int64)
-    if len(work.frag_pixel):
-        cell_pixel[frag_rows] = work.frag_pixel[np.minimum(thread[frag_rows], len(work.frag_pixel) - 1)]
-    mapping = np.array([thread_mapping(gpu, p) == "triangle" for p in s.passes] + [False], bool)
-    tri_rows = mapping[pass_of]
-    lane_key = thread.astype(np.int64).copy()
-    if tri_rows.any():
-        lane_key[tri_rows] = work.frag_prim[thread[tri_rows]]
-    # stable: keep program order (and fragment order inside a triangle) within each lane
-    key = pass_of * (1 << 40) + lane_key
-    if len(key) and np.any(key[1:] < key[:-1]):
-        order = np.argsort(key, kind="stable")
-        rows, pass_of, lane_key, thread, cell_pixel = (a[order] for a in (rows, pass_of, lane_key, thread,
-                                                                           cell_pixel))
-    n = len(rows)
-    new_lane = np.ones(n, bool)
-    if n:
-        new_lane[1:] = (lane_key[1:] != lane_key[:-1]) | (pass_of[1:] != pass_of[:-1])
-    lane_id = np.cumsum(new_lane) - 1                      # global lane number
-    lane_first = np.flatnonzero(new_lane)
-    pos = np.arange(n) - lane_first[lane_id]               # program position inside the lane
-    lane_pass = pass_of[lane_first]
-    pass_first_lane = np.searchsorted(lane_pass, np.arange(len(s.passes) + 1))
-    lane_rank = np.arange(len(lane_first)) - pass_first_lane[lane_pass]
-    sb_pass = np.zeros(len(s.passes) + 1, bool)
-    op = s.op[rows]
-    sb_code = OPS.index("scoreboard")
-    if (op == sb_code).any():
-        sb_pass[np.unique(pass_of[op == sb_code])] = True
-    warp_in_pass = lane_rank // ws
-    for pi in np.flatnonzero(sb_pass):
-        lanes = np.flatnonzero(lane_pass == pi)
-        warp_in_pass[lanes] = _scoreboard_warps(cell_pixel[lane_first[lanes]], work.width, gpu)
-    # global warp number: passes in order, warps in order inside
-    warps_per_pass = np.zeros(len(s.passes), np.int64)
-    if len(lane_first):
-        np.maximum.at(warps_per_pass, lane_pass, warp_in_pass + 1)
-    pass_warp0 = np.concatenate([[0], np.cumsum(warps_per_pass)])
-    warp = (pass_warp0[lane_pass] + warp_in_pass)[lane_id]
-    code = op.astype(np.int64) * 256 + s.structure[rows]
-    max_pos = int(pos.max()) + 1 if n else 1
-    if n and int(warp.max() + 1) * max_pos < (1 << 50):
-        key = (warp * max_pos + pos) * 4096 + code
-        order = np.argsort(key, kind="stable")        # lanes stay in lane order
-        key = key[order]
-        new_wi = np.r_[True, key[1:] != key[:-1]]
+@dataclass
+class _Piece:
+    """The rows of one group in one pass, before lanes are known."""
+
+    group: int
+    pass_index: int
+    thread: np.ndarray
+    k: np.ndarray | None           # iteration in the group's loop (None: all 0)
+    address: np.ndarray
+    nbytes: np.ndarray | int
+
+
+def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
+    """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes."""
+    n = len(g.thread)
+    threads = np.arange(n, dtype=np.int64) if isinstance(g.thread, _Range) else g.thread
+    count = g.count
+    if int(count.min()) == 1 and int(count.max()) == 1:
+        i = np.arange(n, dtype=np.int64)
+        seq = np.zeros(n, np.int64)
+        single = True
     else:
-        order = np.lexsort((lane_id, code, pos, warp))
-        w_, p_, c_ = warp[order], pos[order], code[order]
-        new_wi = np.r_[True, (w_[1:] != w_[:-1]) | (p_[1:] != p_[:-1]) | (c_[1:] != c_[:-1])] if n else new_lane[:0]
-    thread0 = thread                                   # lane order (lane_first indexes it)
-    rows, thread, cell_pixel = rows[order], thread[order], cell_pixel[order]
-    row_start = np.append(np.flatnonzero(new_wi), n)
-    first = row_start[:-1]
-    wi_op = s.op[rows[first]].astype(np.int64)
-    dep = np.logical_or.reduceat(s.dep[rows], first) if len(first) else np.zeros(0, bool)
-    wi_warp = warp[order[first]]
-    wi_pass = pass_of[order[first]]
-    warp_wi_start = np.searchsorted(wi_warp, np.arange(int(pass_warp0[-1]) + 1))
-    passes = []
-    rate = gpu.raster.triangles_per_cycle
-    lane_prim = np.full(len(lane_first), -1, np.int64)
-    fr = np.flatnonzero(fragment_pass[lane_pass])
-    if len(fr) and len(work.frag_prim):
-        lane_prim[fr] = work.frag_prim[thread0[lane_first[fr]]]
-    for i, p in enumerate(s.passes):
-        w0, w1 = int(pass_warp0[i]), int(pass_warp0[i + 1])
-        lanes = int(pass_first_lane[i + 1] - pass_first_lane[i])
-        flush = -(-work.width * work.height // ws) if p.kind == "flush" else 0
-        pp = PassProgram(i, p.name, p.kind, warp_wi_start[w0:w1 + 1], lanes, flush)
-        mode = thread_mapping(gpu, p)
-        if mode == "fragment":         # the fixed-function rasterizer feeds the warps in triangle order
-            sel = lane_pass == i
-            ready = np.zeros(w1 - w0, np.int64)
-            if sel.any():
-                np.maximum.at(ready, warp_in_pass[sel], np.ceil((lane_prim[sel] + 1) / rate).astype(np.int64))
-            pp.warp_ready, pp.min_cycles = ready, int(np.ceil(work.triangles / rate))
+        i = np.repeat(np.arange(n, dtype=np.int64), count)
+        seq = np.arange(len(i), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+        single = False
+    base = bases[g.structure]
+    addr = np.asarray(g.offset(i, seq), np.int64) + base
+    nbytes = np.asarray(g.bytes(i, seq), np.int64) if callable(g.bytes) else int(g.bytes)
+    if g.pass_fn is None and np.isscalar(g.pass_index):
+        return [_Piece(gi, int(g.pass_index), threads[i], None if single else seq, addr, nbytes)]
+    pass_of = (np.asarray(g.pass_fn(i, seq), np.int64) if g.pass_fn is not None
+               else np.asarray(g.pass_index, np.int64)[i])
+    pieces = []
+    for p in np.unique(pass_of).tolist():
+        sel = np.flatnonzero(pass_of == p)
+        ii = i[sel]
+        # iteration inside this pass: position among the thread's operations of the group in the pass
+        first = np.r_[True, ii[1:] != ii[:-1]] if len(ii) else np.zeros(0, bool)
+        starts = np.flatnonzero(first)
+        k = np.arange(len(ii), dtype=np.int64) - np.repeat(starts, np.diff(np.append(starts, len(ii))))
+        pieces.append(_Piece(gi, int(p), threads[ii], k if k.any() else None, addr[sel],
+                             nbytes if np.isscalar(nbytes) else nbytes[sel]))
+    return pieces
+
+
+def _bits(n: int) -> int:
+    return max(1, int(n).bit_length())
+
+
+def lower(work: Workload, gpu, keep=None) -> Program:
+    """Warp instructions of ``work.plan`` on ``gpu``.
+
+    ``keep(pass_index, threads) -> bool mask`` selects threads (the sampled
+    fidelity); a pass none of whose threads is kept runs whole.
+    """
+    plan = work.plan
+    total_ops = plan.total_ops()
+    if total_ops > DEFAULT_MAX_OPS:
+        raise GpusimError(f"the run would lower {total_ops:,} operations, over the limit of {DEFAULT_MAX_OPS:,}; "
+                          f"use a smaller trace or --fidelity sampled|analytic")
+    ws = gpu.core.warp_size
+    n_pass = len(plan.passes)
+    modes = [thread_mapping(gpu, p) for p in plan.passes]
+    pieces = [pc for gi, g in enumerate(plan.groups) for pc in _group_pieces(gi, g, work.bases)]
+    totals = np.zeros(n_pass, np.int64)
+    for pc in pieces:
+        totals[pc.pass_index] += len(pc.thread)
+    if keep is not None:
+        masks = [keep(pc.pass_index, pc.thread) for pc in pieces]
+        kept = np.zeros(n_pass, np.int64)
+        for pc, m in zip(pieces, masks):
+            kept[pc.pass_index] += int(m.sum())
+        whole = (kept == 0) & (totals > 0)
+        for j, (pc, m) in enumerate(zip(pieces, masks)):
+            if not whole[pc.pass_index] and not m.all():
+                sel = np.flatnonzero(m)
+                pieces[j] = _Piece(pc.group, pc.pass_index, pc.thread[sel], None if pc.k is None else pc.k[sel],
+                                   pc.address[sel], pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[sel])
+    by_pass: list[list[_Piece]] = [[] for _ in range(n_pass)]
+    for pc in pieces:
+        if len(pc.thread):
+            by_pass[pc.pass_index].append(pc)
+
+    passes, inst, rows = [], [], []
+    warp0 = 0
+    row_at = 0
+    for p, pk in enumerate(plan.passes):
+        mode, ps = modes[p], by_pass[p]
+        ops = sum(len(pc.thread) for pc in ps)
+        if not ps:
+            flush = -(-work.width * work.height // ws) if pk.kind == "flush" else 0
+            passes.append(PassProgram(p, pk.name, pk.kind, np.zeros(1, np.int64), 0, flush,
+                                      operations=0, operations_total=int(totals[p])))
+            continue
+        # lanes of the pass: distinct lane keys in submission order
+        keys = [work.frag_prim[pc.thread] if mode == "triangle" else pc.thread for pc in ps]
+        universe = max(int(k.max()) for k in keys) + 1
+        present = np.zeros(universe, bool)
+        for k in keys:
+            present[k] = True
+        lane_keys = np.flatnonzero(present)
+        rank_of = np.cumsum(present) - 1
+        n_lanes = len(lane_keys)
+        if any(plan.groups[pc.group].op == "scoreboard" for pc in ps):
+            pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
+            warp_of_lane = _scoreboard_warps(pix, work.width, gpu)
+            first_lane = np.searchsorted(warp_of_lane, np.arange(int(warp_of_lane[-1]) + 1))
+            lane_in_warp = np.arange(n_lanes) - first_lane[warp_of_lane]
+        else:
+            warp_of_lane = np.arange(n_lanes, dtype=np.int64) // ws
+            lane_in_warp = np.arange(n_lanes, dtype=np.int64) % ws
+        n_warps = int(warp_of_lane[-1]) + 1
+        # triangle mapping: iteration j of a lane's loop is its triangle's j-th fragment (in thread order)
+        j_of = None
+        if mode == "triangle":
+            frag_present = np.zeros(len(work.frag_prim), bool)
+            for pc in ps:
+                frag_present[pc.thread] = True
+            fr = np.flatnonzero(frag_present)
+            prim = work.frag_prim[fr]
+            order = np.argsort(prim, kind="stable")
+            sp = prim[order]
+            start = np.flatnonzero(np.r_[True, sp[1:] != sp[:-1]])
+            rank = np.empty(len(fr), np.int64)
+            rank[order] = np.arange(len(fr)) - np.repeat(start, np.diff(np.append(start, len(fr))))
+            j_of = np.zeros(len(work.frag_prim), np.int64)
+            j_of[fr] = rank
+        lane_bits = _bits(ws)
+        for pc, key in zip(ps, keys):
+            r = rank_of[key]
+            w = warp_of_lane[r]
+            j = j_of[pc.thread] if j_of is not None else None
+            k = pc.k
+            bw, bj = _bits(n_warps), _bits(int(j.max()) if j is not None else 0)
+            bk = _bits(int(k.max()) if k is not None else 0)
+            hi = w
+            if j is not None:
+                hi = (hi << bj) | j
+            if k is not None:
+                hi = (hi << bk) | k
+            if bw + bj + bk + lane_bits > 62:
+                raise GpusimError(f"pass '{pk.name}' is too large to lower ({n_warps:,} warps, "
+                                  f"{int(j.max()) if j is not None else 0:,} fragments per triangle, "
+                                  f"{int(k.max()) if k is not None else 0:,} operations per thread); "
+                                  f"use --fidelity sampled|analytic")
+            full = (hi << lane_bits) | lane_in_warp[r]
+            if len(full) > 1 and not (full[1:] >= full[:-1]).all():
+                order = np.argsort(full, kind="stable")
+                full, hi, w = full[order], hi[order], w[order]
+                pc = _Piece(pc.group, p, pc.thread[order], None if k is None else k[order], pc.address[order],
+                            pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[order])
+                j = None if j is None else j[order]
+                k = pc.k
+            start = np.flatnonzero(np.r_[True, hi[1:] != hi[:-1]])
+            n = len(hi)
+            inst.append((w[start] + warp0, j[start] if j is not None else np.zeros(len(start), np.int64),
+                         np.full(len(start), pc.group, np.int64),
+                         k[start] if k is not None else np.zeros(len(start), np.int64),
+                         start + row_at, np.append(start[1:], n) + row_at, np.full(len(start), p, np.int64)))
+            op = OPS.index(plan.groups[pc.group].op)
+            rows.append((np.full(n, op, np.uint8), pc.address,
+                         np.full(n, pc.nbytes, np.int64) if np.isscalar(pc.nbytes) else pc.nbytes, pc.thread))
+            row_at += n
+        pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, operations=ops, operations_total=int(totals[p]))
+        if mode == "fragment":           # the fixed-function rasterizer feeds the warps in triangle order
+            first_lane = np.searchsorted(warp_of_lane, np.arange(n_warps))
+            pp.warp_triangles = np.maximum.reduceat(work.frag_prim[lane_keys] + 1, first_lane)
         elif mode == "triangle":
             pp.setup_cycles = gpu.raster.setup_instructions * gpu.core.issue_cycles
+        pp.wi_start = np.arange(n_warps + 1) + warp0       # global warp numbers; made instruction offsets below
         passes.append(pp)
-    return Program(passes, row_start, wi_op, OP_CLASS[wi_op], dep, OP_PRODUCES[wi_op], wi_warp, wi_pass,
-                   s.op[rows], s.address[rows].astype(np.int64), s.bytes[rows].astype(np.int64), thread,
-                   rows, cell_pixel, s.structure[rows])
+        warp0 += n_warps
+    if inst:
+        w, j, g, k, lo, hi, pa = (np.concatenate(c) for c in zip(*inst))
+        order = np.lexsort((k, g, j, w))
+        w, g, k, lo, hi, pa = w[order], g[order], k[order], lo[order], hi[order], pa[order]
+        op_r, addr, nb, thread = (np.concatenate(c) for c in zip(*rows))
+    else:
+        w = g = k = lo = hi = pa = np.zeros(0, np.int64)
+        op_r, addr, nb, thread = np.zeros(0, np.uint8), *(np.zeros(0, np.int64) for _ in range(3))
+    warp_wi_start = np.searchsorted(w, np.arange(warp0 + 1))
+    for pp in passes:
+        pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
+    wi_op = np.array([OPS.index(gr.op) for gr in plan.groups], np.int64)[g] if len(g) else g
+    wi_dep = np.array([gr.dep for gr in plan.groups], bool)[g] if len(g) else np.zeros(0, bool)
+    return Program(passes, lo, hi, wi_op, OP_CLASS[wi_op], wi_dep, OP_PRODUCES[wi_op], w, pa, g, k,
+                   op_r, addr, nb, thread, work.frag_pixel, work.triangles)
 
 
 def _scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:

@@ -1,16 +1,21 @@
-"""The event model: SIMT cores replaying warp instructions through the units (simpy).
+"""The event model: SIMT cores replaying warp instructions through the units.
 
-One simpy Environment per run owns all state. Each SM runs up to
-``core.warps_per_sm`` resident warps; warps go to SMs round robin in
-submission order and a finished warp's slot takes the SM's next warp. A warp
-issues its instructions in program order through the SM's issue port (each
-instruction and the ``core.instructions_per_op`` ALU instructions around it
-hold the port ``core.issue_cycles`` each); an instruction that depends on the
-thread's previous result waits for it, and other warps of the SM issue
-meanwhile (latency hiding). Units are timestamp servers (gpusim.hw.units):
-serving a request is arithmetic on the unit's free time, so an instruction
-costs one simpy event unless it must wait for another warp (a reorder buffer,
-the scoreboard).
+A discrete-event machine with its own event queue: a heap of (cycle, order of
+scheduling, what happens), processed in time order, ties in the order they
+were scheduled. One Machine per run owns all state (the clock, the queue, the
+units). Units are timestamp servers (gpusim.hw.units): serving a request is
+arithmetic on the unit's free time, done at the cycle the request issues, so
+requests reach every unit in time order and an instruction costs one queue
+entry unless it must wait for another warp (a reorder buffer, the scoreboard),
+which the unit signals (``Signal``) when it clears.
+
+Each SM runs up to ``core.warps_per_sm`` resident warps; warps go to SMs round
+robin in submission order and a finished warp's slot takes the SM's next warp.
+A warp issues its instructions in program order through the SM's issue port
+(each instruction and the ``core.instructions_per_op`` ALU instructions around
+it hold the port ``core.issue_cycles`` each; warps take the port in the order
+they ask for it); an instruction that depends on the thread's previous result
+waits for it, and other warps of the SM issue meanwhile (latency hiding).
 
 Geometry passes of the graphics pipeline get their fragments from a
 fixed-function rasterizer (``raster.triangles_per_cycle``): a warp starts once
@@ -25,16 +30,19 @@ heuristic) drains the pipeline (``core.pipeline_latency``) and runs a
 full-screen quad of ALU-only fragments.
 
 Units no instruction reaches are not built. A run that makes no progress for
-``runner.no_progress_cycles`` fails naming the unit and queue it is stuck on;
+``runner.no_progress_cycles`` (a deadlock: warps wait on each other and
+nothing is left to happen) fails naming the unit and queue it is stuck on;
 ``runner.max_cycles`` bounds the run.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
+from heapq import heappop, heappush
+from itertools import count
 
 import numpy as np
-import simpy
 
 from gpusim.errors import GpusimError
 from gpusim.hw.atomic import AtomicUnits
@@ -42,6 +50,7 @@ from gpusim.hw.lower import ATOMIC, MEM, ROP, SCOREBOARD, Program
 from gpusim.hw.memory import Partitions
 from gpusim.hw.rop import RopUnits
 from gpusim.hw.scoreboard import Scoreboard
+from gpusim.hw.units import Signal
 from gpusim.schemes.opstream import OPS
 
 
@@ -55,28 +64,30 @@ def flush_cycles(gpu, warps: int) -> int:
     return gpu.core.pipeline_latency + per_sm * gpu.core.issue_cycles * (1 + gpu.core.instructions_per_op)
 
 
+# a warp in flight: [next instruction, end, SM, warp, value ready, floor, last completion, cells, phase, queue]
+WI, END, SM, WARP, VALUE, FLOOR, DONE, CELLS, PHASE, QUEUE = range(10)
+START, READY, ISSUE = 0, 1, 2      # phases: about to start (setup), next instruction to try, issue now
+
+
 class Machine:
     """A GPU built for one program: only the units its instructions reach."""
 
     def __init__(self, gpu, program: Program, width: int):
         self.gpu, self.prog = gpu, program
-        self.env = simpy.Environment()
+        self.now = 0
+        self._queue: list = []
+        self._order = count()
         classes = program.classes()
         self.partitions = Partitions(gpu, program) if MEM in classes else None
         self.atomics = AtomicUnits(gpu, program) if ATOMIC in classes else None
-        self.rop = RopUnits(gpu, program, self.env) if ROP in classes else None
-        self.scoreboard = Scoreboard(gpu, program, width, self.env) if SCOREBOARD in classes else None
+        self.rop = RopUnits(gpu, program, self.fire) if ROP in classes else None
+        self.scoreboard = Scoreboard(gpu, program, width, self.fire, self.at) if SCOREBOARD in classes else None
         self.sm_free = [0] * gpu.core.sms
         self.issue_cost = gpu.core.issue_cycles * (1 + gpu.core.instructions_per_op)
         self.progress = 0
-        self.waiting: dict[int, str] = {}
+        self.waiting: dict[int, tuple] = {}        # warp -> (pass, SM, instruction, unit) it waits on
         self.pass_cycles: list[int] = []
         self.finished = False
-        self._done = 0
-        # plain lists: the hot loop indexes them per instruction
-        self._cls = program.wi_class.tolist()
-        self._dep = program.wi_dep.tolist()
-        self._prod = program.wi_produces.tolist()
 
     # ------------------------------------------------------------------ build
     def built_units(self) -> list[str]:
@@ -90,130 +101,176 @@ class Machine:
         out = list(self.partitions.units()) if self.partitions is not None else []
         return out + [u for u in (self.atomics, self.rop, self.scoreboard) if u is not None]
 
+    # ------------------------------------------------------------- the queue
+    def at(self, cycle: int, what) -> None:
+        """Run the callable ``what`` at ``cycle`` (not before now)."""
+        heappush(self._queue, (max(cycle, self.now), next(self._order), what))
+
+    def fire(self, signal: Signal) -> None:
+        """Hand the warps waiting on ``signal`` back to the queue at the current cycle."""
+        for st in signal.waiters:
+            del self.waiting[st[WARP]]
+            heappush(self._queue, (self.now, next(self._order), st))
+        signal.waiters = []
+
     # ------------------------------------------------------------------- run
     def run(self) -> int:
         """Simulate every pass; the total cycles."""
-        env, r = self.env, self.gpu.runner
-        main = env.process(self._passes())
-        env.process(self._watchdog())
-        env.run(until=env.any_of([main, env.timeout(r.max_cycles)]))    # NoProgress propagates
-        if not self.finished:
-            raise GpusimError(f"the run passed runner.max_cycles = {r.max_cycles:,} cycles before finishing "
+        for p in self.prog.passes:
+            start = self.now
+            if p.kind == "flush":
+                self.now += flush_cycles(self.gpu, p.flush_warps)
+            elif p.warps:
+                self._run_pass(p)
+            self._guard_max(self.now)
+            self.pass_cycles.append(int(self.now - start))
+        self.finished = True
+        return int(self.now)
+
+    def _guard_max(self, cycle: int) -> None:
+        limit = self.gpu.runner.max_cycles
+        if cycle > limit:
+            raise GpusimError(f"the run passed runner.max_cycles = {limit:,} cycles before finishing "
                               f"(pass {len(self.pass_cycles)} of {len(self.prog.passes)}); raise "
                               f"--gpu-set runner.max_cycles=N or use a smaller trace")
-        return int(env.now)
 
-    def _passes(self):
-        env = self.env
-        for p in self.prog.passes:
-            start = env.now
-            if p.kind == "flush":
-                yield env.timeout(flush_cycles(self.gpu, p.flush_warps))
-            elif p.warps:
-                self._done = start
-                procs = []
-                sms = self.gpu.core.sms
-                for sm in range(min(sms, p.warps)):
-                    queue = deque(range(sm, p.warps, sms))
-                    for _ in range(min(self.gpu.core.warps_per_sm, len(queue))):
-                        procs.append(env.process(self._slot(p, sm, queue)))
-                yield env.all_of(procs)
-                end = max(self._done, self.rop.drain if self.rop is not None else 0, start + p.min_cycles)
-                if end > env.now:
-                    yield env.timeout(end - env.now)
-            self.pass_cycles.append(int(env.now - start))
-        self.finished = True
+    def _run_pass(self, p) -> None:
+        gpu = self.gpu
+        start = self.now
+        sms, rate = gpu.core.sms, gpu.raster.triangles_per_cycle
+        ready = None
+        min_end = start
+        if p.warp_triangles is not None:      # the fixed-function rasterizer
+            ready = (start + np.ceil(p.warp_triangles / rate).astype(np.int64)).tolist()
+            min_end = start + math.ceil(self.prog.triangles / rate)
+        wi_start = p.wi_start.tolist()
+        for sm in range(min(sms, p.warps)):
+            waiting = deque(range(sm, p.warps, sms))
+            for _ in range(min(gpu.core.warps_per_sm, len(waiting))):
+                self._start(waiting, sm, start, wi_start, ready)
+        done = self._loop(p, wi_start, ready)
+        end = max(done, self.rop.drain if self.rop is not None else 0, min_end)
+        self._guard_max(end)
+        self.now = end
 
-    def _slot(self, p, sm, queue):
-        start = self.env.now
+    def _start(self, waiting: deque, sm: int, t: int, wi_start, ready) -> None:
+        """The SM slot takes its next warp at cycle ``t`` (once the rasterizer has its triangles)."""
+        w = waiting.popleft()
+        if ready is not None and ready[w] > t:
+            t = ready[w]
+        heappush(self._queue, (t, next(self._order), [wi_start[w], wi_start[w + 1], sm, w, t, t, t, None, START,
+                                                     waiting]))
+
+    def _loop(self, p, wi_start, ready) -> int:
+        """Process the queue until the pass's warps are done; the cycle its last operation completes."""
+        queue, order = self._queue, self._order
+        cls_of, dep_of, prod_of = self.prog.wi_class.tolist(), self.prog.wi_dep.tolist(), self.prog.wi_produces.tolist()
+        sm_free, cost, setup = self.sm_free, self.issue_cost, p.setup_cycles
+        mem = self.partitions.access if self.partitions is not None else None
+        atom = self.atomics.access if self.atomics is not None else None
+        rop, sb = self.rop, self.scoreboard
+        limit = self.gpu.runner.no_progress_cycles
+        max_cycles = self.gpu.runner.max_cycles
+        now = self.now
+        last_progress = now
+        done_all = now
         while queue:
-            w = queue.popleft()
-            if p.warp_ready is not None and start + int(p.warp_ready[w]) > self.env.now:
-                yield self.env.timeout(start + int(p.warp_ready[w]) - self.env.now)   # rasterizer not there yet
-            if p.setup_cycles:             # software triangle setup holds the SM's issue port
-                self.sm_free[sm] = max(self.sm_free[sm], self.env.now) + p.setup_cycles
-            yield from self._warp(p, int(p.wi_start[w]), int(p.wi_start[w + 1]), sm, w)
-
-    def _warp(self, p, wi0, wi1, sm, w):
-        env, cost = self.env, self.issue_cost
-        cls_of, dep_of, prod_of = self._cls, self._dep, self._prod
-        sm_free = self.sm_free
-        value_ready = floor = done_max = env.now
-        cells = None
-        for wi in range(wi0, wi1):
-            now = env.now
-            ready = floor if floor > now else now
-            if dep_of[wi] and value_ready > ready:
-                ready = value_ready
-            if ready > now:
-                yield env.timeout(ready - now)
-                now = ready
-            t = sm_free[sm]
-            if t < now:
-                t = now
-            sm_free[sm] = t + cost
+            t, _, st = heappop(queue)
             if t > now:
-                yield env.timeout(t - now)
-            self.progress += 1
-            cls = cls_of[wi]
-            if cls == MEM:
-                done = self.partitions.access(wi, t)
-            elif cls == ATOMIC:
-                done = self.atomics.access(wi, t)
-            elif cls == ROP:
-                floor, done = yield from self._until_answered(
-                    lambda: self.rop.access(wi, t, prod_of[wi]), w,
-                    lambda: f"warp {w} of pass '{p.name}' on SM {sm}, instruction {wi} ({self._what(wi)})")
-            else:                                   # SCOREBOARD
-                cells = yield from self._until_answered(
-                    lambda: self.scoreboard.acquire(wi), w,
-                    lambda: f"warp {w} of pass '{p.name}' on SM {sm} at the scoreboard")
-                done = floor = env.now
-            if prod_of[wi]:
-                value_ready = done
-            if done > done_max:
-                done_max = done
-        if done_max > self._done:
-            self._done = done_max
-        if cells is not None:
-            self.scoreboard.release(cells, done_max)
+                if t - last_progress > limit:
+                    self.now = last_progress + limit
+                    raise NoProgress(self.diagnosis(limit))
+                if t > max_cycles:
+                    self._guard_max(t)
+                now = self.now = t
+            if type(st) is not list:          # a unit's timed event (a scoreboard release)
+                st()
+                continue
+            phase = st[PHASE]
+            if phase == START:
+                if setup:                      # software triangle setup holds the SM's issue port
+                    sm = st[SM]
+                    sm_free[sm] = (sm_free[sm] if sm_free[sm] > now else now) + setup
+                phase = READY
+            while True:
+                wi = st[WI]
+                if phase == READY:
+                    if wi == st[END]:          # the warp is done; its slot takes the SM's next warp
+                        if st[DONE] > done_all:
+                            done_all = st[DONE]
+                        if st[CELLS] is not None:
+                            sb.release(st[CELLS], st[DONE])
+                        if st[QUEUE]:
+                            self._start(st[QUEUE], st[SM], now, wi_start, ready)
+                        break
+                    r = st[FLOOR] if st[FLOOR] > now else now
+                    if dep_of[wi] and st[VALUE] > r:
+                        r = st[VALUE]
+                    if r > now:                # wait for the result it depends on
+                        st[PHASE] = READY
+                        heappush(queue, (r, next(order), st))
+                        break
+                    sm = st[SM]
+                    ti = sm_free[sm] if sm_free[sm] > now else now
+                    sm_free[sm] = ti + cost
+                    if ti > now:               # the issue port is taken until ti
+                        st[PHASE] = ISSUE
+                        heappush(queue, (ti, next(order), st))
+                        break
+                # issue instruction wi at cycle now
+                cls = cls_of[wi]
+                if cls == MEM:
+                    d = mem(wi, now)
+                elif cls == ATOMIC:
+                    d = atom(wi, now)
+                elif cls == ROP:
+                    res = rop.access(wi, now, now, prod_of[wi])
+                    if type(res) is Signal:
+                        self._wait(st, res, p, wi, "rop")
+                        break
+                    st[FLOOR], d = res
+                else:                          # SCOREBOARD
+                    res = sb.acquire(wi)
+                    if type(res) is Signal:
+                        self._wait(st, res, p, wi, "scoreboard")
+                        break
+                    st[CELLS] = res
+                    d = st[FLOOR] = now
+                self.progress += 1
+                last_progress = now
+                if prod_of[wi]:
+                    st[VALUE] = d
+                if d > st[DONE]:
+                    st[DONE] = d
+                st[WI] = wi + 1
+                phase = READY
+        if self.waiting:                       # warps wait on each other and nothing is left to happen
+            self.now = last_progress + limit
+            raise NoProgress(self.diagnosis(limit))
+        return done_all
 
-    def _until_answered(self, ask, w: int, where):
-        """``ask()`` until it answers rather than handing back an event to wait on (a unit's queue)."""
-        while True:
-            res = ask()
-            if not isinstance(res, simpy.Event):
-                return res
-            self.waiting[w] = where()
-            yield res
-            del self.waiting[w]
-            self.progress += 1
+    def _wait(self, st, signal: Signal, p, wi: int, unit: str) -> None:
+        st[PHASE] = ISSUE                      # retry the same instruction when the unit signals
+        signal.waiters.append(st)
+        self.waiting[st[WARP]] = (p.name, st[SM], wi, unit)
 
     def _what(self, wi: int) -> str:
         r = self.prog.rows(wi)
         return f"{OPS[int(self.prog.wi_op[wi])]} x{r.stop - r.start}"
-
-    def _watchdog(self):
-        limit = self.gpu.runner.no_progress_cycles
-        last = -1
-        while not self.finished:
-            yield self.env.timeout(limit)
-            if self.finished:
-                return
-            if self.progress == last:
-                raise NoProgress(self.diagnosis(limit))
-            last = self.progress
 
     def diagnosis(self, limit: int) -> str:
         stuck = []
         for u in (self.rop, self.scoreboard):
             if u is not None:
                 stuck += u.blocked()
-        warps = list(self.waiting.values())
         where = "; ".join(stuck) or "no unit reports a queue"
-        first = f"; first waiting: {warps[0]}" if warps else ""
-        return (f"no progress for {limit:,} cycles at cycle {int(self.env.now):,} "
-                f"(pass {len(self.pass_cycles)}): {where}; {len(warps)} warp(s) waiting{first}. "
+        first = ""
+        if self.waiting:
+            w, (name, sm, wi, unit) = next(iter(self.waiting.items()))
+            first = (f"; first waiting: warp {w} of pass '{name}' on SM {sm}, instruction {wi} "
+                     f"({self._what(wi)}) at the {unit}")
+        return (f"no progress for {limit:,} cycles at cycle {int(self.now):,} "
+                f"(pass {len(self.pass_cycles)}): {where}; {len(self.waiting)} warp(s) waiting{first}. "
                 f"This is a deadlock in the modelled machine: check the GPU config (e.g. rop.reorder_entries, "
                 f"scoreboard.entries) or raise runner.no_progress_cycles if the run is only slow")
 
@@ -234,7 +291,7 @@ class Machine:
         return [s.row() for u in self.units() for s in u.stats(total)]
 
     def line_trace(self) -> str:
-        parts = [f"t={int(self.env.now)} progress={self.progress} waiting={len(self.waiting)}"]
+        parts = [f"t={int(self.now)} progress={self.progress} waiting={len(self.waiting)} queued={len(self._queue)}"]
         if self.partitions is not None:
             parts.append(self.partitions.line_trace())
         parts += [u.line_trace() for u in (self.atomics, self.rop, self.scoreboard) if u is not None]

@@ -24,7 +24,7 @@ import numpy as np
 
 from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
 from gpusim.schemes.opstream import OPS
-from gpusim.hw.units import FP, Unit, cycles, fp_cost, fp_costs
+from gpusim.hw.units import FP, Unit, cycles, div, fp_cost, fp_costs, mod
 
 SECTOR = 32     # bytes
 
@@ -109,27 +109,38 @@ class Partitions:
         wi_of = np.repeat(wis, counts)
         S = m.segment_bytes
         addr, nbytes = prog.address[rows], np.maximum(prog.nbytes[rows], 1)
-        seg = addr // S
-        span = (addr + nbytes - 1) // S - seg + 1
-        if (span > 1).any():               # an access wider than a segment touches several
+        seg = div(addr, S)
+        if (mod(addr, S) + nbytes > S).any():    # an access wider than a segment touches several
+            span = div(addr + nbytes - 1, S) - seg + 1
             k = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
             wi_of, addr, nbytes = np.repeat(wi_of, span), np.repeat(addr, span), np.repeat(nbytes, span)
             seg = np.repeat(seg, span) + k
             lo, hi = np.maximum(addr, seg * S), np.minimum(addr + nbytes, (seg + 1) * S)
             nbytes = hi - lo
-        # one request per (instruction, segment): sorted by instruction, then segment
-        key, inv = np.unique(wi_of * (1 << 36) + seg, return_inverse=True)
+        # one request per (instruction, segment); lanes in address order (the common case) need no sort
+        key = (wi_of << 36) | seg
+        if len(key) > 1 and not (key[1:] >= key[:-1]).all():
+            order = np.argsort(key, kind="stable")
+            key, nbytes = key[order], nbytes[order]
+        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+        key = key[starts]
         req_wi, req_seg = key >> 36, key & ((1 << 36) - 1)
-        touched = np.bincount(inv.ravel(), weights=nbytes, minlength=len(key)).astype(np.int64)
-        req_bytes = np.minimum(-(-touched // SECTOR) * SECTOR, max(m.segment_bytes, SECTOR))
+        touched = np.add.reduceat(nbytes, starts)
+        req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(m.segment_bytes, SECTOR))
         req_addr = req_seg * m.segment_bytes
-        req_part = (req_addr // m.interleave_bytes) % P
-        write = np.isin(prog.wi_op, [OPS.index("store"), RMW_WRITE])
+        req_part = mod(div(req_addr, m.interleave_bytes), P)
+        write_op = np.zeros(len(OPS), bool)
+        write_op[[OPS.index("store"), RMW_WRITE]] = True
+        write = write_op[prog.wi_op]
         self.bytes_written = int(req_bytes[write[req_wi]].sum())
         self.bytes_read = int(req_bytes.sum()) - self.bytes_written
-        row_part = (prog.address // m.interleave_bytes) % P
-        rmw = np.zeros(prog.instructions, bool)
-        rmw[wis[np.isin(prog.wi_op[wis], [RMW_READ, RMW_WRITE])]] = True
+        rmw_op = np.zeros(len(OPS), bool)
+        rmw_op[[RMW_READ, RMW_WRITE]] = True
+        rmw = rmw_op[prog.wi_op]
+
+        def row_part(r: slice):
+            return mod(div(prog.address[r], m.interleave_bytes), P)
+
         if self.l2 is None:
             # bytes, cost and requests per (instruction, partition): dense, no sort
             cell = req_wi * P + req_part
@@ -137,21 +148,21 @@ class Partitions:
             nreq = np.bincount(cell, minlength=prog.instructions * P)
             hit = np.flatnonzero(nreq)
             cost = fp_costs(nb[hit], gpu.dram.bytes_per_cycle)
-            k_wi, k_p = hit // P, hit % P
+            k_wi, k_p = hit // P, hit % P      # (instruction, partition) cells with requests
             self.dram.requests = np.bincount(k_p, weights=nreq[hit], minlength=P).astype(np.int64).tolist()
             self.dram.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
             self.kp, self.kc = k_p.tolist(), cost.tolist()      # flat; instruction wi owns off[wi]:off[wi+1]
             self.off = np.searchsorted(k_wi, np.arange(prog.instructions + 1)).tolist()
-            self.rmw = {wi: (prog.rows(wi), row_part[prog.rows(wi)]) for wi in np.flatnonzero(rmw).tolist()}
+            self.rmw = {wi: (prog.rows(wi), row_part(prog.rows(wi))) for wi in np.flatnonzero(rmw).tolist()}
             return
         bounds = np.append(np.flatnonzero(np.r_[True, req_wi[1:] != req_wi[:-1]]), len(req_wi)).tolist()
-        lines = req_addr // self.l2.line
+        lines = div(req_addr, self.l2.line)
         for j in range(len(bounds) - 1):
             a, b = bounds[j], bounds[j + 1]
             wi = int(req_wi[a])
             r = prog.rows(wi) if rmw[wi] else None
             self.table[wi] = ((req_part[a:b], lines[a:b], req_bytes[a:b]), bool(write[wi]),
-                              (r, row_part[r]) if r is not None else None)
+                              (r, row_part(r)) if r is not None else None)
 
     def access(self, wi: int, t: int) -> int:
         """Serve instruction ``wi`` issued at cycle ``t``; the cycle its last request completes."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.hw.lower import ROP, Program
-from gpusim.hw.units import FP, Unit, UnitStat, fp_cost
+from gpusim.hw.units import FP, Signal, Unit, UnitStat, fp_cost
 from gpusim.schemes.opstream import OPS
 
 PROGRAM_BLEND = OPS.index("program_blend")
@@ -32,10 +32,10 @@ PROGRAM_BLEND = OPS.index("program_blend")
 class RopUnits(Unit):
     name = "rop"
 
-    def __init__(self, gpu, program: Program, env):
+    def __init__(self, gpu, program: Program, fire):
         units = gpu.rop.units
         super().__init__(units)
-        self.gpu, self.env = gpu, env
+        self.gpu, self.fire = gpu, fire      # fire(signal): wake the warps waiting on it
         self.icn, self.lat = gpu.memory.interconnect_latency, gpu.rop.latency
         self.C = gpu.rop.reorder_entries
         wis, counts, rows = program.class_rows(ROP)
@@ -43,7 +43,10 @@ class RopUnits(Unit):
         addr = program.address[rows]
         unit = (addr // gpu.memory.interleave_bytes) % units
         # the previous operation on the same address, in submission order
-        order = np.lexsort((program.seq[rows], addr))
+        # submission order on one address: pass, fragment, then program order inside the thread
+        per_row = lambda a: np.repeat(a[wis], counts)  # noqa: E731
+        order = np.lexsort((per_row(program.wi_k), per_row(program.wi_group), program.thread[rows],
+                            per_row(program.wi_pass), addr))
         pred = np.full(n, -1, np.int64)
         same = np.r_[False, addr[order][1:] == addr[order][:-1]] if n else np.zeros(0, bool)
         pred[order[same]] = order[np.flatnonzero(same) - 1]
@@ -71,8 +74,9 @@ class RopUnits(Unit):
         self.first = {wi: j for j, wi in enumerate(wis.tolist())}
         self.placed: dict[int, int] = {}          # instruction -> lanes placed so far
 
-    def access(self, wi: int, t: int, produces: bool):
-        """(cycle the warp may go on, cycle the result is back) or an event to wait for and retry."""
+    def access(self, wi: int, t: int, now: int, produces: bool):
+        """(cycle the warp may go on, cycle the result is back), or a Signal to wait on and retry at ``now``
+        (``t``: the cycle the instruction issued)."""
         j = self.first[wi]
         a, b = self.off[j], self.off[j + 1]
         done = self.placed.get(wi, a)
@@ -84,17 +88,17 @@ class RopUnits(Unit):
                     self.placed[wi] = i
                     self.stalls += 1
                     if self.space[u] is None:
-                        self.space[u] = self.env.event()
+                        self.space[u] = Signal()
                     return self.space[u]
                 self.held[u] += 1
                 self.max_held[u] = max(self.max_held[u], self.held[u])
-                self.arrive[i] = self.env.now + self.icn
+                self.arrive[i] = now + self.icn
                 self.waiting_on.setdefault(p, []).append(i)
             else:
-                self.arrive[i] = self.env.now + self.icn
+                self.arrive[i] = now + self.icn
                 self._commit(i)
         self.placed[wi] = b
-        go = max(t, self.env.now)          # a warp stalled by a full buffer goes on once it is placed
+        go = max(t, now)          # a warp stalled by a full buffer goes on once it is placed
         if not produces:
             return go, go
         value = go
@@ -102,7 +106,7 @@ class RopUnits(Unit):
             if self.commit[i] < 0:
                 ev = self.commit_events.get(i)
                 if ev is None:
-                    ev = self.commit_events[i] = self.env.event()
+                    ev = self.commit_events[i] = Signal()
                 return ev
             value = max(value, self.commit[i] + self.lat + self.icn)
         return go, value
@@ -120,12 +124,12 @@ class RopUnits(Unit):
                 self.drain = c + self.lat
             ev = self.commit_events.pop(i, None)
             if ev is not None:
-                ev.succeed()
+                self.fire(ev)
             for k in self.waiting_on.pop(i, ()):
                 uk = self.unit[k]
                 self.held[uk] -= 1
                 if self.space[uk] is not None:
-                    self.space[uk].succeed()
+                    self.fire(self.space[uk])
                     self.space[uk] = None
                 stack.append(k)
 

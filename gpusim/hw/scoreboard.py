@@ -18,27 +18,27 @@ from collections import deque
 import numpy as np
 
 from gpusim.hw.lower import SCOREBOARD, Program, scoreboard_cell
-from gpusim.hw.units import Unit, UnitStat
+from gpusim.hw.units import Signal, Unit, UnitStat
 
 
 class Scoreboard(Unit):
     name = "scoreboard"
 
-    def __init__(self, gpu, program: Program, width: int, env):
+    def __init__(self, gpu, program: Program, width: int, fire, at):
         super().__init__(1)
-        self.env = env
+        self.fire, self.at = fire, at           # wake waiting warps now; run a callable at a later cycle
         self.entries = gpu.scoreboard.entries
-        self.held: dict[int, object] = {}       # cell -> event of its release (None until someone waits)
+        self.held: dict[int, object] = {}       # cell -> Signal of its release (None until someone waits)
         self.room: deque = deque()              # warps waiting for room in a full scoreboard, in order
         self.stalls = 0
         self.max_held = 0
         self.table = {}
         for wi in np.flatnonzero(program.wi_class == SCOREBOARD).tolist():
             r = program.rows(wi)
-            self.table[wi] = scoreboard_cell(program.cell_pixel[r], width, gpu.scoreboard.granularity).tolist()
+            self.table[wi] = scoreboard_cell(program.frag_pixel[program.thread[r]], width, gpu.scoreboard.granularity).tolist()
 
     def acquire(self, wi: int):
-        """The warp's cells if it may dispatch now, else an event to wait for and retry."""
+        """The warp's cells if it may dispatch now, else a Signal to wait on and retry."""
         cells = self.table[wi]
         held = self.held
         for c in cells:
@@ -46,12 +46,12 @@ class Scoreboard(Unit):
                 self.stalls += 1
                 ev = held[c]
                 if ev is None:
-                    ev = held[c] = self.env.event()
+                    ev = held[c] = Signal()
                 self._wake_next()
                 return ev
         if len(held) + len(cells) > self.entries:
             self.stalls += 1
-            ev = self.env.event()
+            ev = Signal()
             self.room.append(ev)
             return ev
         for c in cells:
@@ -64,17 +64,17 @@ class Scoreboard(Unit):
     def _wake_next(self) -> None:
         """Let the next warp waiting for room retry (one at a time: no stampede)."""
         if self.room and len(self.held) < self.entries:
-            self.room.popleft().succeed()
+            self.fire(self.room.popleft())
 
     def release(self, cells: list[int], at: int) -> None:
         """Free ``cells`` at cycle ``at`` (the warp's last operation completes)."""
-        def done(_event):
+        def done():
             for c in cells:
                 ev = self.held.pop(c)
                 if ev is not None:
-                    ev.succeed()
+                    self.fire(ev)
             self._wake_next()
-        self.env.timeout(max(0, at - self.env.now)).callbacks.append(done)
+        self.at(at, done)
 
     def blocked(self) -> list[str]:
         waiting = sum(1 for ev in self.held.values() if ev is not None) + len(self.room)

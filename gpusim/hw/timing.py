@@ -59,10 +59,14 @@ def _hazards(rec: dict, program: Program, machine: Machine, work: Workload, resu
     return image
 
 
-def run_full(work: Workload, gpu, result=None, reference=None, keep=None) -> tuple[dict, object]:
-    """The event model on ``work`` (rows ``keep`` only, if given); (record, image with RMW artifacts or None)."""
+def run_full(work: Workload, gpu, result=None, reference=None, program: Program | None = None
+             ) -> tuple[dict, object]:
+    """The event model on ``work`` (or on an already lowered sample of it); (record, image with RMW artifacts
+    or None)."""
     start = time.perf_counter()
-    program = lower(work, gpu, keep)
+    sampled = program is not None
+    if program is None:
+        program = lower(work, gpu)
     machine = Machine(gpu, program, work.width)
     total = machine.run()
     rec = _base(gpu, "full", program, len(program.op))
@@ -71,62 +75,69 @@ def run_full(work: Workload, gpu, result=None, reference=None, keep=None) -> tup
     rec["units_built"] = machine.built_units()
     rec["units"] = machine.unit_summaries(total)
     rec["unit_stats"] = machine.unit_stats(total)
-    image = _hazards(rec, program, machine, work, result if keep is None else None, reference)
+    image = _hazards(rec, program, machine, work, None if sampled else result, reference)
     rec["event_seconds"] = time.perf_counter() - start
     return _finish(rec, gpu, total), image
 
 
-def tile_sample(work: Workload, gpu) -> tuple[np.ndarray, dict]:
-    """Rows of the stream kept by the tile sample, and what was sampled."""
-    s, c = work.stream, gpu.sample
-    fragment_pass = np.array([p.threads == "fragment" for p in s.passes], bool)
-    pixel_pass = np.array([p.threads == "pixel" for p in s.passes], bool)
-    pi = s.pass_index.astype(np.int64)
-    pixel = np.full(len(s), -1, np.int64)
-    fr = fragment_pass[pi]
-    if len(work.frag_pixel):
-        pixel[fr] = work.frag_pixel[np.minimum(s.thread[fr], len(work.frag_pixel) - 1)]
-    px = pixel_pass[pi]
-    pixel[px] = s.thread[px]
+def tile_sample(work: Workload, gpu):
+    """The threads the tile sample keeps: ``keep(pass_index, threads) -> mask``, and what was sampled.
+
+    Fragment threads are kept by the screen tile of their pixel, pixel threads
+    by their own tile, and other threads (memory entries) by a hash of their
+    warp-sized block, each at ``sample.fraction``.
+    """
+    c, plan = gpu.sample, work.plan
     tiles_x = -(-work.width // c.tile)
-    tile = np.where(pixel >= 0, (pixel // work.width // c.tile) * tiles_x + (pixel % work.width) // c.tile, -1)
-    present = np.unique(tile[tile >= 0])
+
+    def tile_of(pixel):
+        return (pixel // work.width // c.tile) * tiles_x + (pixel % work.width) // c.tile
+
+    present = np.zeros(tiles_x * -(-work.height // c.tile), bool)
+    if any(p.threads == "fragment" for p in plan.passes) and len(work.frag_pixel):
+        present[tile_of(work.frag_pixel)] = True
+    if any(p.threads == "pixel" for p in plan.passes):
+        present[:] = True
+    tiles = np.flatnonzero(present)
     rng = np.random.default_rng(c.seed)
-    k = max(1, int(round(c.fraction * len(present)))) if len(present) else 0
-    chosen = np.sort(rng.choice(present, size=k, replace=False)) if k else present
-    keep = np.isin(tile, chosen)
-    block = s.thread[tile < 0].astype(np.int64) // gpu.core.warp_size
-    hashed = ((block * 2654435761 + c.seed * 97) & 0xFFFFFFFF) < int(c.fraction * 2**32)
-    keep[tile < 0] = hashed
-    total = np.bincount(pi, minlength=len(s.passes))
-    kept = np.bincount(pi[keep], minlength=len(s.passes))
-    empty = (kept == 0) & (total > 0)            # nothing of this pass in the sample: run it whole
-    keep |= empty[pi]
-    kept = np.bincount(pi[keep], minlength=len(s.passes))
-    scale = np.where(kept > 0, total / np.maximum(kept, 1), 1.0)
-    return keep, {"tiles": int(len(present)), "tiles_sampled": int(k), "tile": c.tile, "seed": c.seed,
-                  "fraction": c.fraction, "operations_sampled": int(keep.sum()), "scale": scale.tolist()}
+    k = max(1, int(round(c.fraction * len(tiles)))) if len(tiles) else 0
+    chosen = np.zeros(len(present), bool)
+    chosen[rng.choice(tiles, size=k, replace=False) if k else tiles] = True
+    threshold = int(c.fraction * 2**32)
+
+    def keep(p: int, threads: np.ndarray) -> np.ndarray:
+        kind = plan.passes[p].threads
+        if kind == "fragment":
+            return chosen[tile_of(work.frag_pixel[threads])]
+        if kind == "pixel":
+            return chosen[tile_of(threads)]
+        block = threads // gpu.core.warp_size
+        return ((block * 2654435761 + c.seed * 97) & 0xFFFFFFFF) < threshold
+
+    return keep, {"tiles": int(len(tiles)), "tiles_sampled": int(k), "tile": c.tile, "seed": c.seed,
+                  "fraction": c.fraction}
 
 
 def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict, None]:
     start = time.perf_counter()
     keep, info = tile_sample(work, gpu)
+    program = lower(work, gpu, keep)
+    kept, total = sum(p.operations for p in program.passes), sum(p.operations_total for p in program.passes)
     # the sample gets its share of the rasterizer, so a raster-bound pass scales back to the whole
-    share = max(1, int(keep.sum())) / max(1, len(work.stream))
+    share = max(1, kept) / max(1, total)
     sample_gpu = replace(gpu, raster=replace(gpu.raster, triangles_per_cycle=gpu.raster.triangles_per_cycle / share))
-    rec, _ = run_full(work, sample_gpu, keep=keep)
-    for p, f in zip(rec["passes"], info.pop("scale")):     # both in pass order
+    rec, _ = run_full(work, sample_gpu, program=program)
+    for p, pp in zip(rec["passes"], program.passes):     # both in pass order
         p["sampled_cycles"] = p["cycles"]
-        p["cycles"] = int(round(p["cycles"] * f))
-    total = sum(p["cycles"] for p in rec["passes"])
+        p["cycles"] = int(round(p["cycles"] * (pp.operations_total / pp.operations if pp.operations else 1.0)))
     rec["fidelity"] = "sampled"
-    rec["sample"] = info
-    rec["operations"] = int(len(work.stream))
-    ops_scale = len(work.stream) / max(1, info["operations_sampled"])
+    rec["sample"] = info | {"operations_sampled": int(kept)}
+    rec["operations"] = int(total)
+    ops_scale = total / max(1, kept)
     rec["rmw_hazards"] = int(round(rec.get("rmw_hazards", 0) * ops_scale))
     rec["rmw_hazard_pixels"] = int(round(rec.get("rmw_hazard_pixels", 0) * ops_scale))
     rec["event_seconds"] = time.perf_counter() - start
-    return _finish(rec, gpu, total), None
+    return _finish(rec, gpu, sum(p["cycles"] for p in rec["passes"])), None
 
 
 def run_analytic(work, gpu, result=None, reference=None) -> tuple[dict, None]:

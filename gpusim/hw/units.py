@@ -80,3 +80,23 @@ class Unit:
         """One line of state for debugging (PyMTL style)."""
         return f"{self.name}: " + " ".join(f"[{i}] busy={self.busy_fp[i] // FP} req={self.requests[i]}"
                                            for i in range(min(self.instances, 8)))
+
+
+class Signal:
+    """Warps waiting on a unit's condition (a free reorder-buffer entry, a committed result, a released
+    scoreboard cell); the unit hands them back to the machine with ``Machine.fire`` at the current cycle."""
+
+    __slots__ = ("waiters",)
+
+    def __init__(self):
+        self.waiters: list = []
+
+
+def div(a, d: int):
+    """``a // d`` for non-negative integer arrays (a shift when ``d`` is a power of two)."""
+    return a >> (d.bit_length() - 1) if d & (d - 1) == 0 else a // d
+
+
+def mod(a, d: int):
+    """``a % d`` for non-negative integer arrays (a mask when ``d`` is a power of two)."""
+    return a & (d - 1) if d & (d - 1) == 0 else a % d
