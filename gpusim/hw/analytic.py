@@ -35,24 +35,31 @@ from gpusim.hw.memory import SECTOR
 from gpusim.schemes.opstream import OPS, _Range
 
 
-def _uniq_inv(a: np.ndarray):
-    """Sorted distinct values and the inverse (fast when ``a`` is already sorted, as thread lists are)."""
-    if len(a) and np.any(a[1:] < a[:-1]):
-        order = np.argsort(a, kind="stable")
-        s = a[order]
-        new = np.r_[True, s[1:] != s[:-1]]
-        inv = np.empty(len(a), np.int64)
-        inv[order] = np.cumsum(new) - 1
-        return s[new], inv
-    new = np.r_[True, a[1:] != a[:-1]] if len(a) else np.zeros(0, bool)
-    return a[new], np.cumsum(new) - 1
+def _distinct(a: np.ndarray) -> int:
+    """How many distinct values (no sort when ``a`` is already sorted, as a warp's lanes usually are)."""
+    if len(a) > 1 and not (a[1:] >= a[:-1]).all():
+        a = np.sort(a)
+    return int(np.count_nonzero(a[1:] != a[:-1])) + 1 if len(a) else 0
 
 
-def _run_lengths(a: np.ndarray) -> np.ndarray:
-    """How often each distinct value occurs."""
-    s = np.sort(a)
-    edges = np.flatnonzero(np.r_[True, s[1:] != s[:-1], True]) if len(s) else np.zeros(1, np.int64)
-    return np.diff(edges)
+def _hottest(addr: np.ndarray) -> int:
+    """Most operations on one address."""
+    if not len(addr):
+        return 0
+    lo, hi = int(addr.min()), int(addr.max())
+    if hi - lo <= 8 * len(addr):
+        return int(np.bincount(addr - lo).max())
+    s = np.sort(addr)
+    edges = np.flatnonzero(np.r_[True, s[1:] != s[:-1], True])
+    return int(np.diff(edges).max())
+
+
+def _warp_max(values: np.ndarray, ws: int) -> np.ndarray:
+    """Per warp of ``ws`` consecutive lanes, the largest value."""
+    pad = -len(values) % ws
+    if pad:
+        values = np.concatenate([values, np.zeros(pad, values.dtype)])
+    return values.reshape(-1, ws).max(axis=1)
 
 
 def _expand_pass(g, n):
@@ -61,8 +68,11 @@ def _expand_pass(g, n):
     first = np.cumsum(g.count) - g.count
     seq = np.arange(len(i)) - np.repeat(first, g.count)
     p = np.asarray(g.pass_fn(i, seq), np.int64)
-    key, inv = _uniq_inv(p * n + i)
-    return key // n, key % n, np.bincount(inv)
+    key = p * n + i
+    if len(key) > 1 and not (key[1:] >= key[:-1]).all():
+        key = np.sort(key)
+    new = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else np.zeros(0, np.int64)
+    return key[new] // n, key[new] % n, np.diff(np.append(new, len(key)))
 
 
 def analytic_timing(result, work, gpu) -> dict:
@@ -79,9 +89,9 @@ def analytic_timing(result, work, gpu) -> dict:
     hottest = np.zeros(n_pass)
     rop_unit = np.zeros((n_pass, gpu.rop.units))
     used: list[set] = [set() for _ in range(n_pass)]
-    chains: dict[int, list] = {}          # pass -> (lanes, chain cycles) per group
     last_producer: dict[int, int | None] = {}
     waited: dict[int, bool] = {}
+    chain: dict[int, np.ndarray] = {}     # pass -> dependent-chain cycles per lane key (dense)
     for g in plan.groups:
         n = len(g.thread)
         thread = np.arange(n) if isinstance(g.thread, _Range) else g.thread
@@ -89,53 +99,62 @@ def analytic_timing(result, work, gpu) -> dict:
         cls, produces = int(OP_CLASS[op]), bool(OP_PRODUCES[op])
         if g.pass_fn is not None:
             gp, li, cnt = _expand_pass(g, n)
-        else:
-            gp = np.broadcast_to(np.asarray(g.pass_index, np.int64), (n,))
+            split = [(p, gp == p) for p in np.unique(gp).tolist()]
+        elif np.isscalar(g.pass_index):
             li, cnt = np.arange(n), g.count
+            split = [(int(g.pass_index), None)]
+        else:
+            li, cnt = np.arange(n), g.count
+            split = [(p, g.pass_index == p) for p in np.unique(g.pass_index).tolist()]
         nb = g.bytes if not callable(g.bytes) else None
-        for p in np.unique(gp).tolist():
-            sel = gp == p
-            lanes, counts = thread[li[sel]], cnt[sel]
-            lanes_sel = li[sel]
+        for p, sel in split:
+            lanes_sel, counts = (li, cnt) if sel is None else (li[sel], cnt[sel])
+            lanes = thread[lanes_sel]
             used[p].add(cls)
             if thread_mapping(gpu, plan.passes[p]) == "triangle":
                 lanes = work.frag_prim[lanes]
+            # per lane: operations, and the group's threads it runs (several fragments of one triangle)
+            size = int(lanes.max()) + 1
+            per_lane = np.bincount(lanes, weights=counts, minlength=size)
+            threads_in = np.bincount(lanes, minlength=size)
+            present = np.flatnonzero(threads_in)
             # warp instructions: lanes in order, each warp issues its busiest lane's count
-            ul, inv = _uniq_inv(lanes)
-            per_lane = np.bincount(inv, weights=counts, minlength=len(ul))
-            warp = np.arange(len(ul)) // ws
-            wmax = np.zeros(int(warp[-1]) + 1 if len(warp) else 0)
-            np.maximum.at(wmax, warp, per_lane)
-            wis[p] += wmax.sum()
+            wis[p] += _warp_max(per_lane[present], ws).sum()
             ops = float(counts.sum())
-            # first operation of each lane: coalescing and the hottest address
+            # first operation of each thread: coalescing and the hottest address
             addr = bases[g.structure] + np.asarray(g.offset(lanes_sel, np.zeros(len(lanes_sel), np.int64)), np.int64)
             if cls == MEM:
                 bytes_ = float(nb) if nb is not None else float(np.mean(
                     g.bytes(lanes_sel, np.zeros(len(lanes_sel), np.int64))))
                 seg = addr // m.segment_bytes
-                wkey = (np.arange(len(seg)) // ws) * (1 << 36) + seg
-                requests_per_lane = len(_run_lengths(wkey)) / max(1, len(seg))
+                wkey = ((np.arange(len(seg)) // ws) << 36) + seg
+                requests_per_lane = _distinct(wkey) / max(1, len(seg))
                 req_bytes = min(max(m.segment_bytes, SECTOR),
                                 -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
                 dram_bytes[p] += ops * requests_per_lane * req_bytes
             elif cls == ATOMIC:
                 atomic_ops[p] += ops
-                hot = _run_lengths(addr)
-                hottest[p] = max(hottest[p], float(hot.max()) if len(hot) else 0.0)
+                hottest[p] = max(hottest[p], float(_hottest(addr)))
             elif cls == ROP:
                 unit = (addr // m.interleave_bytes) % gpu.rop.units
                 svc = (gpu.blender.cycles_per_op + (nb or 0) / gpu.blender.bytes_per_cycle
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
                 rop_unit[p] += np.bincount(unit, weights=counts * svc, minlength=gpu.rop.units)
-            # dependent chains per lane
+            # dependent chains per lane: every operation issues; a dependent producer waits for each result,
+            # and the first dependent operation after a producer waits once per thread
             add = per_lane * cost
             lp = last_producer.get(p)
             if g.dep and produces:
-                add = add + per_lane * lat[cls]
+                add += per_lane * lat[cls]
             elif g.dep and lp is not None and not waited.get(p, False):
-                add = add + lat[lp]
-            chains.setdefault(p, []).append((ul, add))
+                add += threads_in * lat[lp]
+            have = chain.get(p)
+            if have is None or len(have) < size:
+                grown = np.zeros(size if have is None else max(size, len(have)))
+                if have is not None:
+                    grown[:len(have)] = have
+                have = chain[p] = grown
+            have[:size] += add
             if produces:
                 last_producer[p], waited[p] = cls, False
             elif g.dep:
@@ -147,17 +166,13 @@ def analytic_timing(result, work, gpu) -> dict:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": 0, "bound": "flush"})
             total += cyc
             continue
-        if p not in chains:
+        if p not in chain:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": 0, "warps": 0, "bound": "empty"})
             continue
-        keys = chains[p]
-        allk = np.concatenate([k for k, _ in keys])
-        ul, inv = _uniq_inv(allk)
-        lane_chain = np.bincount(inv, weights=np.concatenate([a for _, a in keys]), minlength=len(ul))
-        warp = np.arange(len(ul)) // ws
-        n_warps = int(warp[-1]) + 1
-        wchain = np.zeros(n_warps)
-        np.maximum.at(wchain, warp, lane_chain)
+        lane_chain = chain[p]
+        lane_chain = lane_chain[lane_chain > 0]       # every lane issues, so a present lane has a chain
+        wchain = _warp_max(lane_chain, ws)
+        n_warps = len(wchain)
         sm = np.arange(n_warps) % c.sms
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
         n_sm = np.bincount(sm, minlength=c.sms)
