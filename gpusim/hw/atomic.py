@@ -15,12 +15,10 @@ the interconnect back to the core.
 
 from __future__ import annotations
 
-from itertools import repeat
-
 import numpy as np
 
 from gpusim.hw.lower import ATOMIC, Program
-from gpusim.hw.units import FP, Unit, UnitStat, fp_costs
+from gpusim.hw.units import FP, Unit, UnitStat, div, fp_costs, mod
 
 
 class AtomicUnits(Unit):
@@ -29,63 +27,59 @@ class AtomicUnits(Unit):
     def __init__(self, gpu, program: Program):
         super().__init__(gpu.memory.partitions)
         self.gpu = gpu
-        self.icn = gpu.memory.interconnect_latency
-        self.free = [0] * self.instances              # sub-cycles
-        wis, counts, rows = program.class_rows(ATOMIC)
-        addr = program.address[rows]
-        uniq, ids = np.unique(addr, return_inverse=True)
-        part = (addr // gpu.memory.interleave_bytes) % self.instances
-        wi_of = np.repeat(wis, counts)
-        ids_s, wi_s, part_s = ids, wi_of, part          # lanes in lane order inside each instruction
-        # operations per (instruction, partition), dense; the unit's work is static
         P = self.instances
-        cell = wi_s * P + part_s
+        c = gpu.atomic
+        self.icn, self.sac, self.tail = gpu.memory.interconnect_latency, c.same_address_cycles, \
+            c.latency + gpu.memory.interconnect_latency
+        self.free = [0] * P                          # sub-cycles
+        self.unit_start = [0] * P                    # cycles: when each unit started the current instruction
+        wis, counts, wi_row = program.storage(ATOMIC)
+        addr = program.rows_of(ATOMIC).address
+        part = mod(div(addr, gpu.memory.interleave_bytes), P)
+        # operations per (instruction, partition), dense; the unit's work is static
+        cell = wi_row * P + part
         nops = np.bincount(cell, minlength=program.instructions * P) if len(cell) else np.zeros(0, np.int64)
         hit = np.flatnonzero(nops)
-        cost = fp_costs(nops[hit], gpu.atomic.ops_per_cycle)
+        cost = fp_costs(nops[hit], c.ops_per_cycle)
         k_wi, k_p = hit // P, hit % P
         self.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
         self.requests = np.bincount(k_p, weights=nops[hit], minlength=P).astype(np.int64).tolist()
-        # flat lists; instruction wi owns lanes lo[wi]:lo[wi+1] and partitions po[wi]:po[wi+1]
+        # flat lists: instruction wi owns partition cells po[wi]:po[wi+1] and lanes lo[wi]:hi[wi]
         self.kp, self.kc = k_p.tolist(), cost.tolist()
         self.po = np.searchsorted(k_wi, np.arange(program.instructions + 1)).tolist()
-        self.lo = np.searchsorted(wi_s, np.arange(program.instructions + 1)).tolist()
-        self.ids, self.part = ids_s.tolist(), part_s.tolist()
-        self.addr_free = [0] * len(uniq)                      # cycles
-        self.addr_ops = np.bincount(ids, minlength=len(uniq))
+        self.lo, self.hi = program.row_lo.tolist(), program.row_hi.tolist()
+        # each lane's address as a small integer id (dense when the addresses are close together)
+        lo = int(addr.min()) if len(addr) else 0
+        if len(addr) and int(addr.max()) - lo <= 16 * len(addr):
+            ids = addr - lo
+            self.addr_ops = np.bincount(ids)
+            self.addr_ops = self.addr_ops[self.addr_ops > 0]
+        else:
+            uniq, ids = np.unique(addr, return_inverse=True)
+            self.addr_ops = np.bincount(ids, minlength=len(uniq))
+        self.ids, self.part = ids.tolist(), part.tolist()
+        self.addr_free = [0] * (int(ids.max()) + 1 if len(ids) else 0)      # cycles
 
     def access(self, wi: int, t: int) -> int:
-        c = self.gpu.atomic
         arrive = (t + self.icn) * FP
-        free = self.free
-        pa, pb = self.po[wi], self.po[wi + 1]
-        la, lb = self.lo[wi], self.lo[wi + 1]
-        ids = self.ids[la:lb]
-        if pb - pa == 1:
-            p = self.kp[pa]
+        free, kp, kc, us = self.free, self.kp, self.kc, self.unit_start
+        for j in range(self.po[wi], self.po[wi + 1]):
+            p = kp[j]
             start = free[p] if free[p] > arrive else arrive
-            free[p] = start + self.kc[pa]
-            lane_unit = -(-start // FP)
-        else:
-            unit_start = {}
-            for j in range(pa, pb):
-                p = self.kp[j]
-                start = free[p] if free[p] > arrive else arrive
-                free[p] = start + self.kc[j]
-                unit_start[p] = -(-start // FP)
-            lane_unit = [unit_start[p] for p in self.part[la:lb]]
-        free_a, sac = self.addr_free, c.same_address_cycles
+            free[p] = start + kc[j]
+            us[p] = -(-start // FP)
+        fa, ids, part, sac = self.addr_free, self.ids, self.part, self.sac
         last = 0
-        if type(lane_unit) is int:
-            lane_unit = repeat(lane_unit)
-        for a, lu in zip(ids, lane_unit):   # lanes of one address in lane order: each waits for the last
-            st = free_a[a]
+        for k in range(self.lo[wi], self.hi[wi]):   # lanes of one address in lane order: each waits for the last
+            a = ids[k]
+            st = fa[a]
+            lu = us[part[k]]
             if st < lu:
                 st = lu
-            free_a[a] = st + sac
+            fa[a] = st + sac
             if st > last:
                 last = st
-        return last + c.latency + self.icn
+        return last + self.tail
 
     def stats(self, total_cycles):
         rows = super().stats(total_cycles)

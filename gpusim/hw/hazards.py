@@ -13,17 +13,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.hw.lower import RMW_READ, RMW_WRITE, Program
+from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
 
 
 def rmw_windows(program: Program, sample: np.ndarray, threads: int):
     """(read cycle, write cycle) of each fragment thread (-1 where it has no RMW)."""
     read = np.full(threads, np.iinfo(np.int64).max, np.int64)
     write = np.full(threads, -1, np.int64)
-    r = program.op == RMW_READ
-    w = program.op == RMW_WRITE
-    np.minimum.at(read, program.thread[r], sample[r])
-    np.maximum.at(write, program.thread[w], sample[w])
+    rows = program.rows_of(MEM)          # ``sample`` is per memory row
+    r = rows.op == RMW_READ
+    w = rows.op == RMW_WRITE
+    np.minimum.at(read, rows.thread[r], sample[r])
+    np.maximum.at(write, rows.thread[w], sample[w])
     read[read == np.iinfo(np.int64).max] = -1
     return read, write
 

@@ -94,12 +94,25 @@ class PassProgram:
 
 
 @dataclass
+class Rows:
+    """The operations of one unit class, instruction by instruction (each instruction's lanes in lane order)."""
+
+    op: np.ndarray                 # OPS code
+    address: np.ndarray            # bytes
+    nbytes: np.ndarray             # bytes
+    thread: np.ndarray             # the scheme's thread (a fragment in submission order, a pixel, an entry)
+
+    def __len__(self) -> int:
+        return len(self.op)
+
+
+@dataclass
 class Program:
     """Warp instructions of a whole run, in issue order, and the rows (operations) they carry.
 
-    Instruction ``i`` carries rows ``row_lo[i]..row_hi[i]-1`` (its lanes, in
-    lane order); rows are stored instruction by instruction, though not in
-    issue order.
+    Rows are kept per unit class (``rows_of(cls)``); instruction ``i`` carries
+    rows ``row_lo[i]..row_hi[i]-1`` of its class (its lanes, in lane order),
+    stored instruction by instruction though not in issue order.
     """
 
     passes: list[PassProgram]
@@ -114,11 +127,7 @@ class Program:
     wi_pass: np.ndarray
     wi_group: np.ndarray           # the plan group the instruction comes from
     wi_k: np.ndarray               # its iteration inside the group's loop
-    # per row (operation)
-    op: np.ndarray
-    address: np.ndarray
-    nbytes: np.ndarray
-    thread: np.ndarray             # the scheme's thread (a fragment in submission order, a pixel, an entry)
+    row_sets: dict[int, Rows]      # unit class -> its rows
     frag_pixel: np.ndarray = field(repr=False, default=None)   # pixel of each fragment thread
     triangles: int = 0             # triangles of the scene (the rasterizer's work per geometry pass)
 
@@ -126,27 +135,26 @@ class Program:
     def instructions(self) -> int:
         return len(self.wi_op)
 
+    @property
+    def operations(self) -> int:
+        return sum(len(r) for r in self.row_sets.values())
+
     def classes(self) -> set[int]:
         return set(np.unique(self.wi_class).tolist())
 
+    def rows_of(self, cls: int) -> Rows:
+        return self.row_sets.get(cls) or Rows(*(np.zeros(0, d) for d in (np.uint8, np.int64, np.int64, np.int64)))
+
     def rows(self, wi: int) -> slice:
+        """Rows of instruction ``wi`` in ``rows_of(wi_class[wi])``."""
         return slice(int(self.row_lo[wi]), int(self.row_hi[wi]))
 
-    def class_rows(self, cls: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Instructions of unit class ``cls`` (in issue order), their lane counts, and their rows (instruction
-        by instruction)."""
+    def storage(self, cls: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Instructions of class ``cls`` in row-storage order, their lane counts, and each row's instruction."""
         wis = np.flatnonzero(self.wi_class == cls)
-        return (wis,) + _ranges(self.row_lo[wis], self.row_hi[wis])
-
-
-def _ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lengths of ``lo[i]..hi[i]`` and the concatenation of those ranges."""
-    counts = hi - lo
-    if not len(counts):
-        return counts, np.zeros(0, np.int64)
-    total = int(counts.sum())
-    starts = np.cumsum(counts) - counts
-    return counts, np.repeat(lo - starts, counts) + np.arange(total)
+        wis = wis[np.argsort(self.row_lo[wis], kind="stable")]
+        counts = self.row_hi[wis] - self.row_lo[wis]
+        return wis, counts, np.repeat(wis, counts)
 
 
 def thread_mapping(gpu, p) -> str:
@@ -242,9 +250,10 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         if len(pc.thread):
             by_pass[pc.pass_index].append(pc)
 
-    passes, inst, rows = [], [], []
+    passes, inst = [], []
+    rows: dict[int, list] = {}         # unit class -> row arrays of its pieces
+    row_at: dict[int, int] = {}
     warp0 = 0
-    row_at = 0
     for p, pk in enumerate(plan.passes):
         mode, ps = modes[p], by_pass[p]
         ops = sum(len(pc.thread) for pc in ps)
@@ -314,14 +323,17 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                 k = pc.k
             start = np.flatnonzero(np.r_[True, hi[1:] != hi[:-1]])
             n = len(hi)
+            op = OPS.index(plan.groups[pc.group].op)
+            cls = int(OP_CLASS[op])
+            at = row_at.get(cls, 0)
             inst.append((w[start] + warp0, j[start] if j is not None else np.zeros(len(start), np.int64),
                          np.full(len(start), pc.group, np.int64),
                          k[start] if k is not None else np.zeros(len(start), np.int64),
-                         start + row_at, np.append(start[1:], n) + row_at, np.full(len(start), p, np.int64)))
-            op = OPS.index(plan.groups[pc.group].op)
-            rows.append((np.full(n, op, np.uint8), pc.address,
-                         np.full(n, pc.nbytes, np.int64) if np.isscalar(pc.nbytes) else pc.nbytes, pc.thread))
-            row_at += n
+                         start + at, np.append(start[1:], n) + at, np.full(len(start), p, np.int64)))
+            rows.setdefault(cls, []).append((np.full(n, op, np.uint8), pc.address,
+                                             np.full(n, pc.nbytes, np.int64) if np.isscalar(pc.nbytes)
+                                             else pc.nbytes, pc.thread))
+            row_at[cls] = at + n
         pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, operations=ops, operations_total=int(totals[p]))
         if mode == "fragment":           # the fixed-function rasterizer feeds the warps in triangle order
             first_lane = np.searchsorted(warp_of_lane, np.arange(n_warps))
@@ -335,17 +347,17 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         w, j, g, k, lo, hi, pa = (np.concatenate(c) for c in zip(*inst))
         order = np.lexsort((k, g, j, w))
         w, g, k, lo, hi, pa = w[order], g[order], k[order], lo[order], hi[order], pa[order]
-        op_r, addr, nb, thread = (np.concatenate(c) for c in zip(*rows))
     else:
         w = g = k = lo = hi = pa = np.zeros(0, np.int64)
-        op_r, addr, nb, thread = np.zeros(0, np.uint8), *(np.zeros(0, np.int64) for _ in range(3))
+    row_sets = {cls: Rows(*(c[0] if len(c) == 1 else np.concatenate(c) for c in zip(*parts)))
+                for cls, parts in rows.items()}
     warp_wi_start = np.searchsorted(w, np.arange(warp0 + 1))
     for pp in passes:
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
     wi_op = np.array([OPS.index(gr.op) for gr in plan.groups], np.int64)[g] if len(g) else g
     wi_dep = np.array([gr.dep for gr in plan.groups], bool)[g] if len(g) else np.zeros(0, bool)
     return Program(passes, lo, hi, wi_op, OP_CLASS[wi_op], wi_dep, OP_PRODUCES[wi_op], w, pa, g, k,
-                   op_r, addr, nb, thread, work.frag_pixel, work.triangles)
+                   row_sets, work.frag_pixel, work.triangles)
 
 
 def _scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:

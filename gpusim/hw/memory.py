@@ -96,19 +96,20 @@ class Partitions:
         self.l2_free = [0] * m.partitions
         self.bytes_read = self.bytes_written = 0
         self.dram_lat = gpu.dram.latency
-        self.sample = np.full(len(program.op), -1, np.int64)   # rmw rows: cycle served
+        self.sample = np.full(len(program.rows_of(MEM)), -1, np.int64)   # rmw rows: cycle served
         self._build(program)
 
     def _build(self, prog: Program) -> None:
         m, gpu = self.gpu.memory, self.gpu
         P = m.partitions
         self.table: list = [None] * prog.instructions
-        wis, counts, rows = prog.class_rows(MEM)
+        wis, counts, _ = prog.storage(MEM)
         if not len(wis):
             return
-        wi_of = np.repeat(wis, counts)
+        R = prog.rows_of(MEM)
+        wi_of = np.repeat(np.arange(len(wis)), counts)        # rank in storage order (monotone)
         S = m.segment_bytes
-        addr, nbytes = prog.address[rows], np.maximum(prog.nbytes[rows], 1)
+        addr, nbytes = R.address, np.maximum(R.nbytes, 1)
         seg = div(addr, S)
         if (mod(addr, S) + nbytes > S).any():    # an access wider than a segment touches several
             span = div(addr + nbytes - 1, S) - seg + 1
@@ -124,7 +125,7 @@ class Partitions:
             key, nbytes = key[order], nbytes[order]
         starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
         key = key[starts]
-        req_wi, req_seg = key >> 36, key & ((1 << 36) - 1)
+        req_wi, req_seg = wis[key >> 36], key & ((1 << 36) - 1)
         touched = np.add.reduceat(nbytes, starts)
         req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(m.segment_bytes, SECTOR))
         req_addr = req_seg * m.segment_bytes
@@ -139,7 +140,7 @@ class Partitions:
         rmw = rmw_op[prog.wi_op]
 
         def row_part(r: slice):
-            return mod(div(prog.address[r], m.interleave_bytes), P)
+            return mod(div(R.address[r], m.interleave_bytes), P)
 
         if self.l2 is None:
             # bytes, cost and requests per (instruction, partition): dense, no sort

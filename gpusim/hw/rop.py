@@ -38,22 +38,22 @@ class RopUnits(Unit):
         self.gpu, self.fire = gpu, fire      # fire(signal): wake the warps waiting on it
         self.icn, self.lat = gpu.memory.interconnect_latency, gpu.rop.latency
         self.C = gpu.rop.reorder_entries
-        wis, counts, rows = program.class_rows(ROP)
-        n = len(rows)
-        addr = program.address[rows]
+        _, _, wi_row = program.storage(ROP)
+        R = program.rows_of(ROP)
+        n = len(R)
+        addr = R.address
         unit = (addr // gpu.memory.interleave_bytes) % units
         # the previous operation on the same address, in submission order
         # submission order on one address: pass, fragment, then program order inside the thread
-        per_row = lambda a: np.repeat(a[wis], counts)  # noqa: E731
-        order = np.lexsort((per_row(program.wi_k), per_row(program.wi_group), program.thread[rows],
-                            per_row(program.wi_pass), addr))
+        order = np.lexsort((program.wi_k[wi_row], program.wi_group[wi_row], R.thread, program.wi_pass[wi_row],
+                            addr))
         pred = np.full(n, -1, np.int64)
         same = np.r_[False, addr[order][1:] == addr[order][:-1]] if n else np.zeros(0, bool)
         pred[order[same]] = order[np.flatnonzero(same) - 1]
         fixed = fp_cost(1, gpu.rop.ops_per_cycle)
         b = gpu.blender
-        prog_blend = program.op[rows] == PROGRAM_BLEND
-        service = np.where(prog_blend, b.cycles_per_op * FP + np.ceil(program.nbytes[rows] * FP
+        prog_blend = R.op == PROGRAM_BLEND
+        service = np.where(prog_blend, b.cycles_per_op * FP + np.ceil(R.nbytes * FP
                                                                         / b.bytes_per_cycle).astype(np.int64),
                            fixed)
         self.blender_ops = int(prog_blend.sum())
@@ -70,15 +70,13 @@ class RopUnits(Unit):
         self.commit_events: dict[int, object] = {}
         self.space = [None] * units
         self.drain = 0
-        self.off = np.concatenate([[0], np.cumsum(counts)]).tolist()
-        self.first = {wi: j for j, wi in enumerate(wis.tolist())}
+        self.lo, self.hi = program.row_lo.tolist(), program.row_hi.tolist()    # instruction -> its rows
         self.placed: dict[int, int] = {}          # instruction -> lanes placed so far
 
     def access(self, wi: int, t: int, now: int, produces: bool):
         """(cycle the warp may go on, cycle the result is back), or a Signal to wait on and retry at ``now``
         (``t``: the cycle the instruction issued)."""
-        j = self.first[wi]
-        a, b = self.off[j], self.off[j + 1]
+        a, b = self.lo[wi], self.hi[wi]
         done = self.placed.get(wi, a)
         for i in range(done, b):
             p = self.pred[i]

@@ -33,9 +33,10 @@ class Scoreboard(Unit):
         self.stalls = 0
         self.max_held = 0
         self.table = {}
+        rows = program.rows_of(SCOREBOARD)
         for wi in np.flatnonzero(program.wi_class == SCOREBOARD).tolist():
             r = program.rows(wi)
-            self.table[wi] = scoreboard_cell(program.frag_pixel[program.thread[r]], width, gpu.scoreboard.granularity).tolist()
+            self.table[wi] = scoreboard_cell(program.frag_pixel[rows.thread[r]], width, gpu.scoreboard.granularity).tolist()
 
     def acquire(self, wi: int):
         """The warp's cells if it may dispatch now, else a Signal to wait on and retry."""

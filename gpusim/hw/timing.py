@@ -69,7 +69,7 @@ def run_full(work: Workload, gpu, result=None, reference=None, program: Program 
         program = lower(work, gpu)
     machine = Machine(gpu, program, work.width)
     total = machine.run()
-    rec = _base(gpu, "full", program, len(program.op))
+    rec = _base(gpu, "full", program, program.operations)
     rec["passes"] = [{"name": p.name, "kind": p.kind, "cycles": c, "warps": p.warps}
                      for p, c in zip(program.passes, machine.pass_cycles)]
     rec["units_built"] = machine.built_units()
