@@ -25,10 +25,12 @@ walks warps and instructions.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from gpusim.errors import GpusimError
+from gpusim.hw.units import div, mod
 from gpusim.schemes.opstream import DEFAULT_MAX_OPS, OPS, OpPlan, _Range
 
 MEM, ATOMIC, ROP, SCOREBOARD = 0, 1, 2, 3
@@ -93,17 +95,49 @@ class PassProgram:
         return len(self.wi_start) - 1
 
 
-@dataclass
 class Rows:
-    """The operations of one unit class, instruction by instruction (each instruction's lanes in lane order)."""
+    """The operations of one unit class, instruction by instruction (each instruction's lanes in lane order).
 
-    op: np.ndarray                 # OPS code
-    address: np.ndarray            # bytes
-    nbytes: np.ndarray             # bytes
-    thread: np.ndarray             # the scheme's thread (a fragment in submission order, a pixel, an entry)
+    Kept as the parts lowering made (one per plan group and pass, each a run of
+    whole instructions), so units can build from them part by part; the
+    columns ``op``, ``address``, ``nbytes`` and ``thread`` over all rows are
+    joined on first use.
+    """
+
+    def __init__(self, parts: list[tuple]):
+        self.parts = parts             # (op code, address, bytes: int or per row, thread) per part, in storage order
 
     def __len__(self) -> int:
-        return len(self.op)
+        return sum(len(p[1]) for p in self.parts)
+
+    def offsets(self) -> list[int]:
+        """Row offset of each part."""
+        out, at = [], 0
+        for p in self.parts:
+            out.append(at)
+            at += len(p[1])
+        return out
+
+    def _join(self, col: int, dtype) -> np.ndarray:
+        cols = [np.full(len(p[1]), p[col], dtype) if np.isscalar(p[col]) else np.asarray(p[col], dtype)
+                for p in self.parts]
+        return np.concatenate(cols) if cols else np.zeros(0, dtype)
+
+    @cached_property
+    def op(self) -> np.ndarray:
+        return self._join(0, np.uint8)
+
+    @cached_property
+    def address(self) -> np.ndarray:
+        return self._join(1, np.int64)
+
+    @cached_property
+    def nbytes(self) -> np.ndarray:
+        return self._join(2, np.int64)
+
+    @cached_property
+    def thread(self) -> np.ndarray:
+        return self._join(3, np.int64)
 
 
 @dataclass
@@ -143,7 +177,7 @@ class Program:
         return set(np.unique(self.wi_class).tolist())
 
     def rows_of(self, cls: int) -> Rows:
-        return self.row_sets.get(cls) or Rows(*(np.zeros(0, d) for d in (np.uint8, np.int64, np.int64, np.int64)))
+        return self.row_sets.get(cls) or Rows([])
 
     def rows(self, wi: int) -> slice:
         """Rows of instruction ``wi`` in ``rows_of(wi_class[wi])``."""
@@ -182,21 +216,22 @@ class _Piece:
 def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes."""
     n = len(g.thread)
-    threads = np.arange(n, dtype=np.int64) if isinstance(g.thread, _Range) else g.thread
     count = g.count
+    i = np.arange(n, dtype=np.int64)
+    threads = i if isinstance(g.thread, _Range) else g.thread
     if int(count.min()) == 1 and int(count.max()) == 1:
-        i = np.arange(n, dtype=np.int64)
-        seq = np.zeros(n, np.int64)
+        seq = np.broadcast_to(np.zeros(1, np.int64), (n,))      # no allocation: every op is the first
         single = True
     else:
-        i = np.repeat(np.arange(n, dtype=np.int64), count)
+        i = np.repeat(i, count)
         seq = np.arange(len(i), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
         single = False
     base = bases[g.structure]
     addr = np.asarray(g.offset(i, seq), np.int64) + base
-    nbytes = np.asarray(g.bytes(i, seq), np.int64) if callable(g.bytes) else int(g.bytes)
+    nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
     if g.pass_fn is None and np.isscalar(g.pass_index):
-        return [_Piece(gi, int(g.pass_index), threads[i], None if single else seq, addr, nbytes)]
+        return [_Piece(gi, int(g.pass_index), threads if single else threads[i], None if single else seq, addr,
+                       nbytes)]
     pass_of = (np.asarray(g.pass_fn(i, seq), np.int64) if g.pass_fn is not None
                else np.asarray(g.pass_index, np.int64)[i])
     pieces = []
@@ -269,17 +304,16 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         for k in keys:
             present[k] = True
         lane_keys = np.flatnonzero(present)
-        rank_of = np.cumsum(present) - 1
         n_lanes = len(lane_keys)
+        rank_of = None if n_lanes == universe else np.cumsum(present) - 1     # None: lane key = rank
         if any(plan.groups[pc.group].op == "scoreboard" for pc in ps):
             pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
             warp_of_lane = _scoreboard_warps(pix, work.width, gpu)
             first_lane = np.searchsorted(warp_of_lane, np.arange(int(warp_of_lane[-1]) + 1))
             lane_in_warp = np.arange(n_lanes) - first_lane[warp_of_lane]
         else:
-            warp_of_lane = np.arange(n_lanes, dtype=np.int64) // ws
-            lane_in_warp = np.arange(n_lanes, dtype=np.int64) % ws
-        n_warps = int(warp_of_lane[-1]) + 1
+            warp_of_lane = lane_in_warp = None           # lanes fill warps in order: rank // ws, rank % ws
+        n_warps = int(warp_of_lane[-1]) + 1 if warp_of_lane is not None else -(-n_lanes // ws)
         # triangle mapping: iteration j of a lane's loop is its triangle's j-th fragment (in thread order)
         j_of = None
         if mode == "triangle":
@@ -297,8 +331,8 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             j_of[fr] = rank
         lane_bits = _bits(ws)
         for pc, key in zip(ps, keys):
-            r = rank_of[key]
-            w = warp_of_lane[r]
+            r = key if rank_of is None else rank_of[key]
+            w = div(r, ws) if warp_of_lane is None else warp_of_lane[r]
             j = j_of[pc.thread] if j_of is not None else None
             k = pc.k
             bw, bj = _bits(n_warps), _bits(int(j.max()) if j is not None else 0)
@@ -313,10 +347,16 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                                   f"{int(j.max()) if j is not None else 0:,} fragments per triangle, "
                                   f"{int(k.max()) if k is not None else 0:,} operations per thread); "
                                   f"use --fidelity sampled|analytic")
-            full = (hi << lane_bits) | lane_in_warp[r]
-            if len(full) > 1 and not (full[1:] >= full[:-1]).all():
+            if j is None and k is None and warp_of_lane is None:
+                in_order = len(r) < 2 or bool((r[1:] > r[:-1]).all())     # lanes ascending: already in place
+            else:
+                full = (hi << lane_bits) | (mod(r, ws) if lane_in_warp is None else lane_in_warp[r])
+                in_order = len(full) < 2 or bool((full[1:] >= full[:-1]).all())
+            if not in_order:
+                if j is None and k is None and warp_of_lane is None:
+                    full = (hi << lane_bits) | mod(r, ws)
                 order = np.argsort(full, kind="stable")
-                full, hi, w = full[order], hi[order], w[order]
+                hi, w = hi[order], w[order]
                 pc = _Piece(pc.group, p, pc.thread[order], None if k is None else k[order], pc.address[order],
                             pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[order])
                 j = None if j is None else j[order]
@@ -330,13 +370,12 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                          np.full(len(start), pc.group, np.int64),
                          k[start] if k is not None else np.zeros(len(start), np.int64),
                          start + at, np.append(start[1:], n) + at, np.full(len(start), p, np.int64)))
-            rows.setdefault(cls, []).append((np.full(n, op, np.uint8), pc.address,
-                                             np.full(n, pc.nbytes, np.int64) if np.isscalar(pc.nbytes)
-                                             else pc.nbytes, pc.thread))
+            rows.setdefault(cls, []).append((op, pc.address, pc.nbytes, pc.thread))
             row_at[cls] = at + n
         pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, operations=ops, operations_total=int(totals[p]))
         if mode == "fragment":           # the fixed-function rasterizer feeds the warps in triangle order
-            first_lane = np.searchsorted(warp_of_lane, np.arange(n_warps))
+            first_lane = (np.arange(0, n_lanes, ws) if warp_of_lane is None
+                          else np.searchsorted(warp_of_lane, np.arange(n_warps)))
             pp.warp_triangles = np.maximum.reduceat(work.frag_prim[lane_keys] + 1, first_lane)
         elif mode == "triangle":
             pp.setup_cycles = gpu.raster.setup_instructions * gpu.core.issue_cycles
@@ -349,8 +388,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         w, g, k, lo, hi, pa = w[order], g[order], k[order], lo[order], hi[order], pa[order]
     else:
         w = g = k = lo = hi = pa = np.zeros(0, np.int64)
-    row_sets = {cls: Rows(*(c[0] if len(c) == 1 else np.concatenate(c) for c in zip(*parts)))
-                for cls, parts in rows.items()}
+    row_sets = {cls: Rows(parts) for cls, parts in rows.items()}
     warp_wi_start = np.searchsorted(w, np.arange(warp0 + 1))
     for pp in passes:
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)

@@ -107,55 +107,52 @@ class Partitions:
         if not len(wis):
             return
         R = prog.rows_of(MEM)
-        wi_of = np.repeat(np.arange(len(wis)), counts)        # rank in storage order (monotone)
-        S = m.segment_bytes
-        addr, nbytes = R.address, np.maximum(R.nbytes, 1)
-        seg = div(addr, S)
-        if (mod(addr, S) + nbytes > S).any():    # an access wider than a segment touches several
-            span = div(addr + nbytes - 1, S) - seg + 1
-            k = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
-            wi_of, addr, nbytes = np.repeat(wi_of, span), np.repeat(addr, span), np.repeat(nbytes, span)
-            seg = np.repeat(seg, span) + k
-            lo, hi = np.maximum(addr, seg * S), np.minimum(addr + nbytes, (seg + 1) * S)
-            nbytes = hi - lo
-        # one request per (instruction, segment); lanes in address order (the common case) need no sort
-        key = (wi_of << 36) | seg
-        if len(key) > 1 and not (key[1:] >= key[:-1]).all():
-            order = np.argsort(key, kind="stable")
-            key, nbytes = key[order], nbytes[order]
-        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-        key = key[starts]
-        req_wi, req_seg = wis[key >> 36], key & ((1 << 36) - 1)
-        touched = np.add.reduceat(nbytes, starts)
-        req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(m.segment_bytes, SECTOR))
-        req_addr = req_seg * m.segment_bytes
-        req_part = mod(div(req_addr, m.interleave_bytes), P)
+        los = prog.row_lo[wis]
         write_op = np.zeros(len(OPS), bool)
         write_op[[OPS.index("store"), RMW_WRITE]] = True
         write = write_op[prog.wi_op]
-        self.bytes_written = int(req_bytes[write[req_wi]].sum())
-        self.bytes_read = int(req_bytes.sum()) - self.bytes_written
         rmw_op = np.zeros(len(OPS), bool)
         rmw_op[[RMW_READ, RMW_WRITE]] = True
         rmw = rmw_op[prog.wi_op]
+        chunks = [q for part, off in zip(R.parts, R.offsets()) for q in self._requests(part, off, los, counts, m)]
+        self.bytes_written = sum(int(nb[write[wis[rank]]].sum()) for rank, _, nb in chunks)
+        self.bytes_read = sum(int(nb.sum()) for _, _, nb in chunks) - self.bytes_written
+
+        def part_of(seg):
+            return mod(div(seg * m.segment_bytes, m.interleave_bytes), P)
 
         def row_part(r: slice):
             return mod(div(R.address[r], m.interleave_bytes), P)
 
         if self.l2 is None:
-            # bytes, cost and requests per (instruction, partition): dense, no sort
-            cell = req_wi * P + req_part
-            nb = np.bincount(cell, weights=req_bytes, minlength=prog.instructions * P)
-            nreq = np.bincount(cell, minlength=prog.instructions * P)
-            hit = np.flatnonzero(nreq)
-            cost = fp_costs(nb[hit], gpu.dram.bytes_per_cycle)
-            k_wi, k_p = hit // P, hit % P      # (instruction, partition) cells with requests
-            self.dram.requests = np.bincount(k_p, weights=nreq[hit], minlength=P).astype(np.int64).tolist()
+            # bytes, cost and requests per (instruction, partition), chunk by chunk (dense over the chunk)
+            cells, nbs, nreqs = [], [], []
+            for rank, seg, nb in chunks:
+                r0 = int(rank[0])
+                cell = (rank - r0) * P + part_of(seg)
+                span = (int(rank[-1]) - r0 + 1) * P
+                b_ = np.bincount(cell, weights=nb, minlength=span)
+                n_ = np.bincount(cell, minlength=span)
+                hit = np.flatnonzero(n_)
+                cells.append(hit + r0 * P)
+                nbs.append(b_[hit])
+                nreqs.append(n_[hit])
+            hit, nb, nreq = np.concatenate(cells), np.concatenate(nbs), np.concatenate(nreqs)
+            cost = fp_costs(nb, gpu.dram.bytes_per_cycle)
+            k_rank, k_p = hit // P, hit % P      # (instruction, partition) cells with requests, in storage order
+            self.dram.requests = np.bincount(k_p, weights=nreq, minlength=P).astype(np.int64).tolist()
             self.dram.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
-            self.kp, self.kc = k_p.tolist(), cost.tolist()      # flat; instruction wi owns off[wi]:off[wi+1]
-            self.off = np.searchsorted(k_wi, np.arange(prog.instructions + 1)).tolist()
+            self.kp, self.kc = k_p.tolist(), cost.tolist()  # instruction wi owns off[rank[wi]]:off[rank[wi] + 1]
+            self.off = np.searchsorted(k_rank, np.arange(len(wis) + 1)).tolist()
+            rank_of = np.zeros(prog.instructions, np.int64)
+            rank_of[wis] = np.arange(len(wis))
+            self.rank = rank_of.tolist()
             self.rmw = {wi: (prog.rows(wi), row_part(prog.rows(wi))) for wi in np.flatnonzero(rmw).tolist()}
             return
+        req_rank, req_seg, req_bytes = (np.concatenate(c) for c in zip(*chunks))
+        req_wi = wis[req_rank]
+        req_part = part_of(req_seg)
+        req_addr = req_seg * m.segment_bytes
         bounds = np.append(np.flatnonzero(np.r_[True, req_wi[1:] != req_wi[:-1]]), len(req_wi)).tolist()
         lines = div(req_addr, self.l2.line)
         for j in range(len(bounds) - 1):
@@ -165,6 +162,46 @@ class Partitions:
             self.table[wi] = ((req_part[a:b], lines[a:b], req_bytes[a:b]), bool(write[wi]),
                               (r, row_part(r)) if r is not None else None)
 
+    @staticmethod
+    def _requests(part, off: int, los: np.ndarray, counts: np.ndarray, m, chunk: int = 1 << 20):
+        """Coalesced requests (instruction rank in storage order, segment, bytes) of one part of the rows,
+        a chunk of whole instructions at a time (arrays small enough for the allocator to reuse)."""
+        _, address, nbytes, _ = part
+        a, b = np.searchsorted(los, [off, off + len(address)])
+        ends = np.cumsum(counts[a:b])
+        out = []
+        S = m.segment_bytes
+        lo = 0
+        while lo < b - a:
+            hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + chunk, side="right")))
+            r0, r1 = (ends[lo - 1] if lo else 0), ends[hi - 1]
+            addr = address[r0:r1]
+            nb = max(int(nbytes), 1) if np.isscalar(nbytes) else np.maximum(nbytes[r0:r1], 1)
+            wi_of = np.repeat(np.arange(a + lo, a + hi), counts[a + lo:a + hi])
+            seg = div(addr, S)
+            if (mod(addr, S) + nb > S).any():       # an access wider than a segment touches several
+                nb = np.broadcast_to(nb, addr.shape)
+                span = div(addr + nb - 1, S) - seg + 1
+                k = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
+                wi_of, addr, nb = np.repeat(wi_of, span), np.repeat(addr, span), np.repeat(nb, span)
+                seg = np.repeat(seg, span) + k
+                nb = np.minimum(addr + nb, (seg + 1) * S) - np.maximum(addr, seg * S)
+            # one request per (instruction, segment); lanes in address order (the common case) need no sort
+            key = (wi_of << 36) | seg
+            if len(key) > 1 and not (key[1:] >= key[:-1]).all():
+                order = np.argsort(key, kind="stable")
+                key = key[order]
+                if not np.isscalar(nb):
+                    nb = nb[order]
+            starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+            touched = (np.add.reduceat(nb, starts) if not np.isscalar(nb)
+                       else np.diff(np.append(starts, len(key))) * nb)
+            req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(S, SECTOR))
+            key = key[starts]
+            out.append((key >> 36, key & ((1 << 36) - 1), req_bytes))
+            lo = hi
+        return out
+
     def access(self, wi: int, t: int) -> int:
         """Serve instruction ``wi`` issued at cycle ``t``; the cycle its last request completes."""
         if self.l2 is not None:
@@ -173,7 +210,8 @@ class Partitions:
             done = self._l2_access(entry, write, (t + self.icn) * FP, starts)
         else:
             kp, kc = self.kp, self.kc
-            a, b = self.off[wi], self.off[wi + 1]
+            r = self.rank[wi]
+            a, b = self.off[r], self.off[r + 1]
             arrive = (t + self.icn) * FP
             free = self.dram_free
             end = 0
