@@ -11,7 +11,8 @@ largest of
   adds that unit's round trip), the slowest warp, or the SM's warps' chains
   divided by the resident warps that hide each other;
 * dram: requests (lanes of a warp on one ``memory.segment_bytes`` segment, as
-  at the first operation of each lane) x bytes, over all channels;
+  at the first operation of each lane, measured on up to 4,096 warps spread
+  evenly over the group) x bytes, over all channels;
 * atomic: operations over all atomic units, and the hottest address
   (operations on one word serialize at ``same_address_cycles``);
 * rop: ROP service cycles of the busiest unit;
@@ -62,6 +63,16 @@ def _warp_max(values: np.ndarray, ws: int) -> np.ndarray:
     return values.reshape(-1, ws).max(axis=1)
 
 
+def _warp_sample(lanes: np.ndarray, ws: int, warps: int = 4096) -> np.ndarray:
+    """The lanes of at most ``warps`` warps spread evenly over ``lanes`` (all of them when fewer)."""
+    n_warps = -(-len(lanes) // ws)
+    if n_warps <= warps:
+        return lanes
+    first = np.linspace(0, n_warps - 1, warps).astype(np.int64) * ws
+    idx = (first[:, None] + np.arange(ws)).ravel()
+    return lanes[idx[idx < len(lanes)]]
+
+
 def _expand_pass(g, n):
     """(pass, lane index into g.thread, ops) per (pass, thread) of a group spanning passes."""
     i = np.repeat(np.arange(n), g.count)
@@ -109,30 +120,36 @@ def analytic_timing(result, work, gpu) -> dict:
         nb = g.bytes if not callable(g.bytes) else None
         for p, sel in split:
             lanes_sel, counts = (li, cnt) if sel is None else (li[sel], cnt[sel])
-            lanes = thread[lanes_sel]
+            lanes = thread if sel is None else thread[lanes_sel]
             used[p].add(cls)
             if thread_mapping(gpu, plan.passes[p]) == "triangle":
                 lanes = work.frag_prim[lanes]
             # per lane: operations, and the group's threads it runs (several fragments of one triangle)
             size = int(lanes.max()) + 1
-            per_lane = np.bincount(lanes, weights=counts, minlength=size)
             threads_in = np.bincount(lanes, minlength=size)
+            c0 = int(counts[0]) if len(counts) else 0
+            uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
+            per_lane = threads_in * c0 if uniform else np.bincount(lanes, weights=counts, minlength=size)
             present = np.flatnonzero(threads_in)
             # warp instructions: lanes in order, each warp issues its busiest lane's count
             wis[p] += _warp_max(per_lane[present], ws).sum()
             ops = float(counts.sum())
-            # first operation of each thread: coalescing and the hottest address
-            addr = bases[g.structure] + np.asarray(g.offset(lanes_sel, np.zeros(len(lanes_sel), np.int64)), np.int64)
+            # first operation of each thread: coalescing (on a spread sample of warps) and the hottest address
             if cls == MEM:
-                bytes_ = float(nb) if nb is not None else float(np.mean(
-                    g.bytes(lanes_sel, np.zeros(len(lanes_sel), np.int64))))
+                sample = _warp_sample(lanes_sel, ws)
+                zero = np.broadcast_to(np.zeros(1, np.int64), sample.shape)
+                addr = bases[g.structure] + np.asarray(g.offset(sample, zero), np.int64)
+                bytes_ = float(nb) if nb is not None else float(np.mean(g.bytes(sample, zero)))
                 seg = addr // m.segment_bytes
                 wkey = ((np.arange(len(seg)) // ws) << 36) + seg
                 requests_per_lane = _distinct(wkey) / max(1, len(seg))
                 req_bytes = min(max(m.segment_bytes, SECTOR),
                                 -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
                 dram_bytes[p] += ops * requests_per_lane * req_bytes
-            elif cls == ATOMIC:
+            else:
+                zero = np.broadcast_to(np.zeros(1, np.int64), lanes_sel.shape)
+                addr = bases[g.structure] + np.asarray(g.offset(lanes_sel, zero), np.int64)
+            if cls == ATOMIC:
                 atomic_ops[p] += ops
                 hottest[p] = max(hottest[p], float(_hottest(addr)))
             elif cls == ROP:
