@@ -47,7 +47,7 @@ class AtomicUnits(Unit):
         # flat lists: instruction wi owns partition cells po[wi]:po[wi+1] and lanes lo[wi]:hi[wi]
         self.kp, self.kc = k_p.tolist(), cost.tolist()
         self.po = np.searchsorted(k_wi, np.arange(program.instructions + 1)).tolist()
-        self.lo, self.hi = program.row_lo.tolist(), program.row_hi.tolist()
+        self.lo, self.hi = program.row_bounds
         # each lane's address as a small integer id (dense when the addresses are close together)
         lo = int(addr.min()) if len(addr) else 0
         if len(addr) and int(addr.max()) - lo <= 16 * len(addr):

@@ -179,6 +179,11 @@ class Program:
     def rows_of(self, cls: int) -> Rows:
         return self.row_sets.get(cls) or Rows([])
 
+    @cached_property
+    def row_bounds(self) -> tuple[list, list]:
+        """``row_lo`` and ``row_hi`` as lists (the units index them per instruction)."""
+        return self.row_lo.tolist(), self.row_hi.tolist()
+
     def rows(self, wi: int) -> slice:
         """Rows of instruction ``wi`` in ``rows_of(wi_class[wi])``."""
         return slice(int(self.row_lo[wi]), int(self.row_hi[wi]))

@@ -96,7 +96,9 @@ class Partitions:
         self.l2_free = [0] * m.partitions
         self.bytes_read = self.bytes_written = 0
         self.dram_lat = gpu.dram.latency
-        self.sample = np.full(len(program.rows_of(MEM)), -1, np.int64)   # rmw rows: cycle served
+        rmw = np.isin(program.wi_op, [RMW_READ, RMW_WRITE]).any()
+        # rmw rows: the cycle each was served (None when the program has no unsynchronised RMW)
+        self.sample = np.full(len(program.rows_of(MEM)), -1, np.int64) if rmw else None
         self._build(program)
 
     def _build(self, prog: Program) -> None:

@@ -70,7 +70,7 @@ class RopUnits(Unit):
         self.commit_events: dict[int, object] = {}
         self.space = [None] * units
         self.drain = 0
-        self.lo, self.hi = program.row_lo.tolist(), program.row_hi.tolist()    # instruction -> its rows
+        self.lo, self.hi = program.row_bounds    # instruction -> its rows
         self.placed: dict[int, int] = {}          # instruction -> lanes placed so far
 
     def access(self, wi: int, t: int, now: int, produces: bool):
