@@ -111,3 +111,18 @@ def test_replay_cli_timing_json(tmp_path, nested, capsys):
     assert main(["replay", str(path), "--scheme", "kbuffer", "--fidelity", "full",
                  "--gpu-set", "rop.units=0"]) != 0
     assert "rop.units: must be >= 1" in capsys.readouterr().err
+
+
+def test_analytic_charges_every_fragment_of_a_triangle_thread():
+    # FreePipe's capture with one thread per triangle: a big triangle's thread pays the atomic round trip
+    # for each of its fragments, so the latency chain is per fragment, not per lane
+    scene, base = load_scene("default")
+    import dataclasses
+    scene = dataclasses.replace(scene, screen=dataclasses.replace(scene.screen, width=96, height=96))
+    trace = trace_scene(scene, base)
+    gpu = load_gpu("gtx280")
+    full = replay(trace, "freepipe-abuffer", {}, "full", gpu)[1]["timing"]
+    est = replay(trace, "freepipe-abuffer", {}, "analytic", gpu)[1]["timing"]
+    capture = [p for p in est["passes"] if p["name"] == "capture"][0]
+    assert capture["bound"] == "latency"
+    assert full["cycles"] / 1.5 < est["cycles"] < full["cycles"] * 1.5, (est["cycles"], full["cycles"])
