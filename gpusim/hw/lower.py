@@ -217,6 +217,12 @@ class _Piece:
     address: np.ndarray
     nbytes: np.ndarray | int
 
+    def take(self, idx: np.ndarray) -> "_Piece":
+        """The rows ``idx`` of this piece (in that order)."""
+        return _Piece(self.group, self.pass_index, self.thread[idx],
+                      None if self.k is None else self.k[idx], self.address[idx],
+                      self.nbytes if np.isscalar(self.nbytes) else self.nbytes[idx])
+
 
 def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes."""
@@ -282,9 +288,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         whole = (kept == 0) & (totals > 0)
         for j, (pc, m) in enumerate(zip(pieces, masks)):
             if not whole[pc.pass_index] and not m.all():
-                sel = np.flatnonzero(m)
-                pieces[j] = _Piece(pc.group, pc.pass_index, pc.thread[sel], None if pc.k is None else pc.k[sel],
-                                   pc.address[sel], pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[sel])
+                pieces[j] = pc.take(np.flatnonzero(m))
     by_pass: list[list[_Piece]] = [[] for _ in range(n_pass)]
     for pc in pieces:
         if len(pc.thread):
@@ -352,18 +356,16 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                                   f"{int(j.max()) if j is not None else 0:,} fragments per triangle, "
                                   f"{int(k.max()) if k is not None else 0:,} operations per thread); "
                                   f"use --fidelity sampled|analytic")
-            if j is None and k is None and warp_of_lane is None:
-                in_order = len(r) < 2 or bool((r[1:] > r[:-1]).all())     # lanes ascending: already in place
+            plain = j is None and k is None and warp_of_lane is None
+            full = None if plain else (hi << lane_bits) | (mod(r, ws) if lane_in_warp is None else lane_in_warp[r])
+            if plain:                        # one op per lane, lanes ascending: the rows are already in place
+                in_order = len(r) < 2 or bool((r[1:] > r[:-1]).all())
             else:
-                full = (hi << lane_bits) | (mod(r, ws) if lane_in_warp is None else lane_in_warp[r])
                 in_order = len(full) < 2 or bool((full[1:] >= full[:-1]).all())
             if not in_order:
-                if j is None and k is None and warp_of_lane is None:
-                    full = (hi << lane_bits) | mod(r, ws)
-                order = np.argsort(full, kind="stable")
+                order = np.argsort((hi << lane_bits) | mod(r, ws) if plain else full, kind="stable")
                 hi, w = hi[order], w[order]
-                pc = _Piece(pc.group, p, pc.thread[order], None if k is None else k[order], pc.address[order],
-                            pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[order])
+                pc = pc.take(order)
                 j = None if j is None else j[order]
                 k = pc.k
             start = np.flatnonzero(np.r_[True, hi[1:] != hi[:-1]])

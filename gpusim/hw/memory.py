@@ -96,9 +96,7 @@ class Partitions:
         self.l2_free = [0] * m.partitions
         self.bytes_read = self.bytes_written = 0
         self.dram_lat = gpu.dram.latency
-        rmw = np.isin(program.wi_op, [RMW_READ, RMW_WRITE]).any()
-        # rmw rows: the cycle each was served (None when the program has no unsynchronised RMW)
-        self.sample = np.full(len(program.rows_of(MEM)), -1, np.int64) if rmw else None
+        self.sample = None      # rmw rows: the cycle each was served (None without unsynchronised RMW)
         self._build(program)
 
     def _build(self, prog: Program) -> None:
@@ -116,6 +114,8 @@ class Partitions:
         rmw_op = np.zeros(len(OPS), bool)
         rmw_op[[RMW_READ, RMW_WRITE]] = True
         rmw = rmw_op[prog.wi_op]
+        if rmw.any():
+            self.sample = np.full(len(R), -1, np.int64)
         chunks = [q for part, off in zip(R.parts, R.offsets()) for q in self._requests(part, off, los, counts, m)]
         self.bytes_written = sum(int(nb[write[wis[rank]]].sum()) for rank, _, nb in chunks)
         self.bytes_read = sum(int(nb.sum()) for _, _, nb in chunks) - self.bytes_written
