@@ -32,11 +32,11 @@ class AtomicUnits(Unit):
         self.icn, self.sac, self.tail = gpu.memory.interconnect_latency, c.same_address_cycles, \
             c.latency + gpu.memory.interconnect_latency
         self.free = [0] * P                          # sub-cycles
-        self.unit_start = [0] * P                    # cycles: when each unit started the current instruction
+        self.until = 0                               # cycles: the last address hold ends
         wis, counts, wi_row = program.storage(ATOMIC)
         addr = program.rows_of(ATOMIC).address
         part = mod(div(addr, gpu.memory.interleave_bytes), P)
-        # operations per (instruction, partition), dense; the unit's work is static
+        # operations per (instruction, partition) cell, dense; the unit's work is static
         cell = wi_row * P + part
         nops = np.bincount(cell, minlength=program.instructions * P) if len(cell) else np.zeros(0, np.int64)
         hit = np.flatnonzero(nops)
@@ -44,42 +44,55 @@ class AtomicUnits(Unit):
         k_wi, k_p = hit // P, hit % P
         self.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
         self.requests = np.bincount(k_p, weights=nops[hit], minlength=P).astype(np.int64).tolist()
-        # flat lists: instruction wi owns partition cells po[wi]:po[wi+1] and lanes lo[wi]:hi[wi]
+        # flat lists: instruction wi owns cells po[wi]:po[wi + 1]; cell j its lanes' addresses ids[cl[j]:cl[j + 1]],
+        # grouped by cell (a stable sort: the lanes of one address, all in one partition, stay in lane order)
         self.kp, self.kc = k_p.tolist(), cost.tolist()
         self.po = np.searchsorted(k_wi, np.arange(program.instructions + 1)).tolist()
-        self.lo, self.hi = program.row_bounds
+        self.cl = np.r_[0, np.cumsum(nops[hit])].tolist()
+        if len(cell) > 1 and not (cell[1:] >= cell[:-1]).all():
+            addr = addr[np.argsort(cell, kind="stable")]
         # each lane's address as a small integer id (dense when the addresses are close together)
         lo = int(addr.min()) if len(addr) else 0
-        if len(addr) and int(addr.max()) - lo <= 16 * len(addr):
+        if len(addr):
             ids = addr - lo
+            common = int(np.bitwise_or.reduce(ids))      # shift out the low address bits no lane uses
+            ids >>= (common & -common).bit_length() - 1 if common else 0
+        if len(addr) and int(ids.max()) <= 16 * len(addr):
             self.addr_ops = np.bincount(ids)
             self.addr_ops = self.addr_ops[self.addr_ops > 0]
         else:
             uniq, ids = np.unique(addr, return_inverse=True)
             self.addr_ops = np.bincount(ids, minlength=len(uniq))
-        self.ids, self.part = ids.tolist(), part.tolist()
+        self.ids = ids.tolist()
         self.addr_free = [0] * (int(ids.max()) + 1 if len(ids) else 0)      # cycles
 
     def access(self, wi: int, t: int) -> int:
         arrive = (t + self.icn) * FP
-        free, kp, kc, us = self.free, self.kp, self.kc, self.unit_start
+        free, kp, kc, cl, ids, fa, sac = self.free, self.kp, self.kc, self.cl, self.ids, self.addr_free, self.sac
+        last = 0
         for j in range(self.po[wi], self.po[wi + 1]):
             p = kp[j]
             start = free[p] if free[p] > arrive else arrive
             free[p] = start + kc[j]
-            us[p] = -(-start // FP)
-        fa, ids, part, sac = self.addr_free, self.ids, self.part, self.sac
-        last = 0
-        for k in range(self.lo[wi], self.hi[wi]):   # lanes of one address in lane order: each waits for the last
-            a = ids[k]
-            st = fa[a]
-            lu = us[part[k]]
-            if st < lu:
-                st = lu
-            fa[a] = st + sac
-            if st > last:
-                last = st
+            u = -(-start // FP)          # the cycle this partition's unit takes the instruction's lanes
+            if u > last:
+                last = u
+            after = u + sac
+            for a in ids[cl[j]:cl[j + 1]]:   # lanes of one address in lane order: each waits for the last
+                st = fa[a]
+                if st <= u:
+                    fa[a] = after
+                else:
+                    fa[a] = st + sac
+                    if st > last:
+                        last = st
+        if last + sac > self.until:
+            self.until = last + sac
         return last + self.tail
+
+    def idle_at(self) -> int:
+        """The cycle every unit and address is free again."""
+        return max(self.until, -(-max(self.free) // FP))
 
     def stats(self, total_cycles):
         rows = super().stats(total_cycles)

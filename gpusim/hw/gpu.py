@@ -138,6 +138,9 @@ class RunnerConfig:
     max_cycles: int = param(10**12, unit="cycles", doc="stop with an error past this many cycles", min=1)
     no_progress_cycles: int = param(1_000_000, unit="cycles", doc="fail with a diagnosis when no warp "
                                     "instruction completes for this long", min=1)
+    workers: int = param(0, unit="processes", doc="processes the event model replays passes in (passes are "
+                         "barriers, so shares of them replay apart with identical results): 1 serial, N up to N, "
+                         "0 one per available CPU when the run is large enough to gain", min=0)
 
 
 @dataclass(frozen=True)

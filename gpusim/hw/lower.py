@@ -339,36 +339,17 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             j_of = np.zeros(len(work.frag_prim), np.int64)
             j_of[fr] = rank
         lane_bits = _bits(ws)
+        placed: list = []            # (threads, k, placement) of this pass's pieces: groups of one thread set share it
         for pc, key in zip(ps, keys):
-            r = key if rank_of is None else rank_of[key]
-            w = div(r, ws) if warp_of_lane is None else warp_of_lane[r]
-            j = j_of[pc.thread] if j_of is not None else None
-            k = pc.k
-            bw, bj = _bits(n_warps), _bits(int(j.max()) if j is not None else 0)
-            bk = _bits(int(k.max()) if k is not None else 0)
-            hi = w
-            if j is not None:
-                hi = (hi << bj) | j
-            if k is not None:
-                hi = (hi << bk) | k
-            if bw + bj + bk + lane_bits > 62:
-                raise GpusimError(f"pass '{pk.name}' is too large to lower ({n_warps:,} warps, "
-                                  f"{int(j.max()) if j is not None else 0:,} fragments per triangle, "
-                                  f"{int(k.max()) if k is not None else 0:,} operations per thread); "
-                                  f"use --fidelity sampled|analytic")
-            plain = j is None and k is None and warp_of_lane is None
-            full = None if plain else (hi << lane_bits) | (mod(r, ws) if lane_in_warp is None else lane_in_warp[r])
-            if plain:                        # one op per lane, lanes ascending: the rows are already in place
-                in_order = len(r) < 2 or bool((r[1:] > r[:-1]).all())
-            else:
-                in_order = len(full) < 2 or bool((full[1:] >= full[:-1]).all())
-            if not in_order:
-                order = np.argsort((hi << lane_bits) | mod(r, ws) if plain else full, kind="stable")
-                hi, w = hi[order], w[order]
+            got = next((pl for th, kk, pl in placed if kk is None and pc.k is None and len(th) == len(pc.thread)
+                        and np.array_equal(th, pc.thread)), None)
+            if got is None:
+                got = _place(pc, key, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps, ws, lane_bits, pk.name)
+                placed.append((pc.thread, pc.k, got))
+            order, hi, w, j, start = got
+            if order is not None:
                 pc = pc.take(order)
-                j = None if j is None else j[order]
-                k = pc.k
-            start = np.flatnonzero(np.r_[True, hi[1:] != hi[:-1]])
+            k = pc.k
             n = len(hi)
             op = OPS.index(plan.groups[pc.group].op)
             cls = int(OP_CLASS[op])
@@ -403,6 +384,40 @@ def lower(work: Workload, gpu, keep=None) -> Program:
     wi_dep = np.array([gr.dep for gr in plan.groups], bool)[g] if len(g) else np.zeros(0, bool)
     return Program(passes, lo, hi, wi_op, OP_CLASS[wi_op], wi_dep, OP_PRODUCES[wi_op], w, pa, g, k,
                    row_sets, work.frag_pixel, work.triangles)
+
+
+def _place(pc: _Piece, key, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps: int, ws: int, lane_bits: int,
+           name: str):
+    """Where the rows of piece ``pc`` go: (row order or None if already in place, instruction key, warp and
+    fragment iteration of each row in that order, first row of each instruction)."""
+    r = key if rank_of is None else rank_of[key]
+    w = div(r, ws) if warp_of_lane is None else warp_of_lane[r]
+    j = j_of[pc.thread] if j_of is not None else None
+    k = pc.k
+    bw, bj = _bits(n_warps), _bits(int(j.max()) if j is not None else 0)
+    bk = _bits(int(k.max()) if k is not None else 0)
+    hi = w
+    if j is not None:
+        hi = (hi << bj) | j
+    if k is not None:
+        hi = (hi << bk) | k
+    if bw + bj + bk + lane_bits > 62:
+        raise GpusimError(f"pass '{name}' is too large to lower ({n_warps:,} warps, "
+                          f"{int(j.max()) if j is not None else 0:,} fragments per triangle, "
+                          f"{int(k.max()) if k is not None else 0:,} operations per thread); "
+                          f"use --fidelity sampled|analytic")
+    plain = j is None and k is None and warp_of_lane is None
+    full = None if plain else (hi << lane_bits) | (mod(r, ws) if lane_in_warp is None else lane_in_warp[r])
+    if plain:                        # one op per lane, lanes ascending: the rows are already in place
+        in_order = len(r) < 2 or bool((r[1:] > r[:-1]).all())
+    else:
+        in_order = len(full) < 2 or bool((full[1:] >= full[:-1]).all())
+    order = None
+    if not in_order:
+        order = np.argsort((hi << lane_bits) | mod(r, ws) if plain else full, kind="stable")
+        hi, w = hi[order], w[order]
+        j = None if j is None else j[order]
+    return order, hi, w, j, np.flatnonzero(np.r_[True, hi[1:] != hi[:-1]])
 
 
 def _scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:

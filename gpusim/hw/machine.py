@@ -88,6 +88,7 @@ class Machine:
         self.progress = 0
         self.waiting: dict[int, tuple] = {}        # warp -> (pass, SM, instruction, unit) it waits on
         self.pass_cycles: list[int] = []
+        self.current_pass = 0
         self.finished = False
 
     # ------------------------------------------------------------------ build
@@ -132,23 +133,59 @@ class Machine:
                 gc.enable()
 
     def _run(self) -> int:
-        for p in self.prog.passes:
+        from gpusim.hw.parallel import plan_shares, run_shares
+        shares = plan_shares(self)
+        if len(shares) > 1 and run_shares(self, shares):
+            return int(self.now)
+        self.pass_cycles = [c for _, c in self.run_share(range(len(self.prog.passes)))]
+        self.finished = True
+        return int(self.now)
+
+    def run_share(self, indices) -> list[tuple[int, int]]:
+        """Simulate the passes ``indices`` (ascending) one after the other from the current cycle; each one's
+        (start cycle, cycles). A pass starts on an idle machine, so its cycles do not depend on the passes
+        before it: shares of the passes can run in separate processes (gpusim.hw.parallel)."""
+        indices = list(indices)
+        if self.rop is not None and len(indices) < len(self.prog.passes):
+            self.rop.assume_committed(indices)
+        out = []
+        for i in indices:
+            p = self.prog.passes[i]
+            self.current_pass = i
             start = self.now
             if p.kind == "flush":
                 self.now += flush_cycles(self.gpu, p.flush_warps)
             elif p.warps:
                 self._run_pass(p)
             self._guard_max(self.now)
-            self.pass_cycles.append(int(self.now - start))
-        self.finished = True
-        return int(self.now)
+            out.append((int(start), int(self.now - start)))
+        return out
 
-    def _guard_max(self, cycle: int) -> None:
+    def counters(self) -> dict:
+        """What a run changed besides time (merged across the processes of a parallel run)."""
+        out = {"progress": self.progress}
+        for u in (self.rop, self.scoreboard):
+            if u is not None:
+                out[u.name] = {a: getattr(u, a) for a in u.COUNTERS}
+        return out
+
+    def merge_counters(self, got: dict) -> None:
+        self.progress += got["progress"]
+        for u in (self.rop, self.scoreboard):
+            if u is not None:
+                for a, how in u.COUNTERS.items():
+                    mine, theirs = getattr(u, a), got[u.name][a]
+                    if isinstance(mine, list):
+                        setattr(u, a, [how(x, y) for x, y in zip(mine, theirs)])
+                    else:
+                        setattr(u, a, how(mine, theirs))
+
+    def _guard_max(self, cycle: int, index: int | None = None) -> None:
         limit = self.gpu.runner.max_cycles
         if cycle > limit:
             raise GpusimError(f"the run passed runner.max_cycles = {limit:,} cycles before finishing "
-                              f"(pass {len(self.pass_cycles)} of {len(self.prog.passes)}); raise "
-                              f"--gpu-set runner.max_cycles=N or use a smaller trace")
+                              f"(pass {self.current_pass if index is None else index} of {len(self.prog.passes)}); "
+                              f"raise --gpu-set runner.max_cycles=N or use a smaller trace")
 
     def _run_pass(self, p) -> None:
         gpu = self.gpu
@@ -165,7 +202,10 @@ class Machine:
             for _ in range(min(gpu.core.warps_per_sm, len(waiting))):
                 self._start(waiting, sm, start, wi_start, ready)
         done = self._loop(p, wi_start, ready)
-        end = max(done, self.rop.drain if self.rop is not None else 0, min_end)
+        # a barrier: the pass ends when its last operation has completed and every unit is idle again, so the
+        # next pass starts on an idle machine (its cycles do not depend on when it starts)
+        end = max(done, min_end, max(self.sm_free),
+                  *(u.idle_at() for u in (self.partitions, self.atomics, self.rop) if u is not None))
         self._guard_max(end)
         self.now = end
 
@@ -286,7 +326,7 @@ class Machine:
             first = (f"; first waiting: warp {w} of pass '{name}' on SM {sm}, instruction {wi} "
                      f"({self._what(wi)}) at the {unit}")
         return (f"no progress for {limit:,} cycles at cycle {int(self.now):,} "
-                f"(pass {len(self.pass_cycles)}): {where}; {len(self.waiting)} warp(s) waiting{first}. "
+                f"(pass {self.current_pass}): {where}; {len(self.waiting)} warp(s) waiting{first}. "
                 f"This is a deadlock in the modelled machine: check the GPU config (e.g. rop.reorder_entries, "
                 f"scoreboard.entries) or raise runner.no_progress_cycles if the run is only slow")
 

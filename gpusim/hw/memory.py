@@ -97,6 +97,8 @@ class Partitions:
         self.bytes_read = self.bytes_written = 0
         self.dram_lat = gpu.dram.latency
         self.sample = None      # rmw rows: the cycle each was served (None without unsynchronised RMW)
+        # access(wi, t): serve instruction wi issued at cycle t; the cycle its last request is back at the core
+        self.access = self._l2_path
         self._build(program)
 
     def _build(self, prog: Program) -> None:
@@ -144,12 +146,12 @@ class Partitions:
             k_rank, k_p = hit // P, hit % P      # (instruction, partition) cells with requests, in storage order
             self.dram.requests = np.bincount(k_p, weights=nreq, minlength=P).astype(np.int64).tolist()
             self.dram.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
-            self.kp, self.kc = k_p.tolist(), cost.tolist()  # instruction wi owns off[rank[wi]]:off[rank[wi] + 1]
-            self.off = np.searchsorted(k_rank, np.arange(len(wis) + 1)).tolist()
-            rank_of = np.zeros(prog.instructions, np.int64)
-            rank_of[wis] = np.arange(len(wis))
-            self.rank = rank_of.tolist()
-            self.rmw = {wi: (prog.rows(wi), row_part(prog.rows(wi))) for wi in np.flatnonzero(rmw).tolist()}
+            # instruction wi owns cells lo[wi]:hi[wi] (kp: partition, kc: sub-cycles)
+            bounds = np.searchsorted(k_rank, np.arange(len(wis) + 1))
+            lo, hi = np.zeros(prog.instructions, np.int64), np.zeros(prog.instructions, np.int64)
+            lo[wis], hi[wis] = bounds[:-1], bounds[1:]
+            rmw_rows = {wi: (prog.rows(wi), row_part(prog.rows(wi))) for wi in np.flatnonzero(rmw).tolist()}
+            self.access = self._dram_access(lo.tolist(), hi.tolist(), k_p.tolist(), cost.tolist(), rmw_rows)
             return
         req_rank, req_seg, req_bytes = (np.concatenate(c) for c in zip(*chunks))
         req_wi = wis[req_rank]
@@ -204,25 +206,31 @@ class Partitions:
             lo = hi
         return out
 
-    def access(self, wi: int, t: int) -> int:
-        """Serve instruction ``wi`` issued at cycle ``t``; the cycle its last request completes."""
-        if self.l2 is not None:
-            entry, write, rmw = self.table[wi]
-            starts: dict = {}
-            done = self._l2_access(entry, write, (t + self.icn) * FP, starts)
-        else:
-            kp, kc = self.kp, self.kc
-            r = self.rank[wi]
-            a, b = self.off[r], self.off[r + 1]
-            arrive = (t + self.icn) * FP
-            free = self.dram_free
+    def _l2_path(self, wi: int, t: int) -> int:
+        """``access`` with an L2."""
+        entry, write, rmw = self.table[wi]
+        starts: dict = {}
+        done = self._l2_access(entry, write, (t + self.icn) * FP, starts)
+        if rmw is not None:
+            self._sample(rmw, [starts.get(p, 0) for p in range(len(self.dram_free))])
+        return done + self.icn
+
+    def _sample(self, rmw, starts: list) -> None:
+        """RMW rows sample memory (reads) or land (writes) when their partition starts serving them."""
+        r, parts = rmw
+        self.sample[r] = -(-np.asarray(starts, np.int64)[parts] // FP)
+
+    def _dram_access(self, lo: list, hi: list, kp: list, kc: list, rmw_rows: dict):
+        """``access`` without an L2: instruction ``wi``'s cells ``lo[wi]:hi[wi]`` (partition ``kp``, sub-cycles
+        ``kc``), each served by its channel back to back; a closure over locals, as it runs once per
+        instruction."""
+        icn, lat, free = self.icn, self.dram_lat, self.dram_free
+        tail = lat + icn
+
+        def access(wi: int, t: int) -> int:
+            arrive = (t + icn) * FP
             end = 0
-            rmw = self.rmw.get(wi) if self.rmw else None
-            if rmw is not None:
-                starts = [0] * len(free)
-                for j in range(a, b):
-                    starts[kp[j]] = max(arrive, free[kp[j]])
-            for j in range(a, b):
+            for j in range(lo[wi], hi[wi]):
                 p = kp[j]
                 e = free[p]
                 if e < arrive:
@@ -231,13 +239,22 @@ class Partitions:
                 free[p] = e
                 if e > end:
                     end = e
-            done = -(-end // FP) + self.dram_lat
-        if rmw is not None:
-            r, parts = rmw
-            if isinstance(starts, dict):
-                starts = [starts.get(p, 0) for p in range(len(self.dram_free))]
-            self.sample[r] = -(-np.asarray(starts, np.int64)[parts] // FP)
-        return done + self.icn
+            return -(-end // FP) + tail
+
+        if not rmw_rows:
+            return access
+
+        def access_rmw(wi: int, t: int) -> int:
+            rmw = rmw_rows.get(wi)
+            if rmw is not None:
+                arrive = (t + icn) * FP
+                starts = [0] * len(free)
+                for j in range(lo[wi], hi[wi]):
+                    starts[kp[j]] = max(arrive, free[kp[j]])
+                self._sample(rmw, starts)
+            return access(wi, t)
+
+        return access_rmw
 
     def _l2_access(self, entry, write, arrive, starts) -> int:
         parts, lines, nbytes = entry
@@ -263,6 +280,10 @@ class Partitions:
                     finish = cycles(dstart + dcost) + d.latency + c.latency
             done = max(done, finish)
         return done
+
+    def idle_at(self) -> int:
+        """The cycle every channel and slice is free again."""
+        return -(-max(self.dram_free + self.l2_free) // FP)
 
     def units(self) -> list[Unit]:
         return [u for u in (self.l2, self.dram) if u is not None and sum(u.requests)]

@@ -20,6 +20,8 @@ interconnect cycles after commit.
 
 from __future__ import annotations
 
+import operator
+
 import numpy as np
 
 from gpusim.hw.lower import ROP, Program
@@ -31,6 +33,7 @@ PROGRAM_BLEND = OPS.index("program_blend")
 
 class RopUnits(Unit):
     name = "rop"
+    COUNTERS = {"stalls": operator.add, "max_held": max}     # changed by a run; merged across processes
 
     def __init__(self, gpu, program: Program, fire):
         units = gpu.rop.units
@@ -39,6 +42,7 @@ class RopUnits(Unit):
         self.icn, self.lat = gpu.memory.interconnect_latency, gpu.rop.latency
         self.C = gpu.rop.reorder_entries
         _, _, wi_row = program.storage(ROP)
+        self.row_pass = program.wi_pass[wi_row]
         R = program.rows_of(ROP)
         n = len(R)
         addr = R.address
@@ -130,6 +134,15 @@ class RopUnits(Unit):
                     self.fire(self.space[uk])
                     self.space[uk] = None
                 stack.append(k)
+
+    def assume_committed(self, indices) -> None:
+        """Only the passes ``indices`` run here: operations of the others count as committed long before
+        (a pass starts after the previous one drained, so that is all an operation sees of them)."""
+        self.commit = np.where(np.isin(self.row_pass, list(indices)), -1, 0).tolist()
+
+    def idle_at(self) -> int:
+        """The cycle the last committed operation's result is out (the buffers are empty at a pass end)."""
+        return self.drain
 
     def blocked(self) -> list[str]:
         """What the units are stuck on (no-progress diagnosis)."""

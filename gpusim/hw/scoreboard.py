@@ -13,6 +13,7 @@ overflows).
 
 from __future__ import annotations
 
+import operator
 from collections import deque
 
 import numpy as np
@@ -23,6 +24,7 @@ from gpusim.hw.units import Signal, Unit, UnitStat
 
 class Scoreboard(Unit):
     name = "scoreboard"
+    COUNTERS = {"stalls": operator.add, "max_held": max, "requests": operator.add}   # merged across processes
 
     def __init__(self, gpu, program: Program, width: int, fire, at):
         super().__init__(1)

@@ -1,0 +1,135 @@
+"""Passes in parallel: shares of a program's passes replayed in forked processes.
+
+Passes are barriers, and a pass ends only when every unit is idle again
+(gpusim.hw.machine), so a pass's cycles do not depend on when it starts: the
+passes can be split into shares, each share replayed in its own process on a
+copy of the freshly built machine (``fork``: nothing is pickled on the way
+in), and the results put back in pass order. The figures are identical to a
+serial run: each pass's cycles, the counters the units keep (merged), and the
+RMW sample times (shifted from the share's timeline to the whole run's).
+
+``runner.workers`` sets the processes: 1 is serial; N >= 2 uses up to N
+whenever two passes have work; 0 (the default) uses one per available CPU
+when the program is large enough to gain (``MIN_INSTRUCTIONS``) and no single
+pass holds nearly all of it. A run with an L2 stays serial (the cache's
+contents carry from pass to pass), as does one on a platform without
+``fork`` or in a process running other (non-daemon) threads. If a share fails (a
+deadlock, the max-cycles guard), the whole run is redone serially, so errors
+read exactly as in a serial run.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+
+import numpy as np
+
+from gpusim.hw.lower import MEM
+
+MIN_INSTRUCTIONS = 50_000     # warp instructions below which auto mode stays serial (a fork costs ~10-50 ms)
+MAX_SHARE = 0.85              # auto mode stays serial when one pass holds this share of the instructions
+
+
+def available_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:                 # not on Linux
+        return os.cpu_count() or 1
+
+
+def _other_threads() -> bool:
+    """Threads a fork could catch holding a lock (daemon helpers such as tqdm's monitor sleep; they are
+    left out)."""
+    return any(t is not threading.main_thread() and not t.daemon for t in threading.enumerate())
+
+
+def plan_shares(machine) -> list[list[int]]:
+    """Pass indices per process (one list: serial). Largest passes first, each to the least loaded share."""
+    prog, workers = machine.prog, machine.gpu.runner.workers
+    auto = workers == 0
+    if auto:
+        workers = available_cpus()
+    weight = [int(p.wi_start[-1] - p.wi_start[0]) if p.warps else 0 for p in prog.passes]
+    busy = [i for i, w in enumerate(weight) if w]
+    everything = [list(range(len(prog.passes)))]
+    if workers < 2 or len(busy) < 2 or machine.partitions is not None and machine.partitions.l2 is not None:
+        return everything
+    if "fork" not in multiprocessing.get_all_start_methods() or _other_threads():
+        return everything
+    total = sum(weight)
+    if auto and (total < MIN_INSTRUCTIONS or max(weight) > MAX_SHARE * total):
+        return everything
+    shares: list[list[int]] = [[] for _ in range(min(workers, len(busy)))]
+    load = [0] * len(shares)
+    for i in sorted(busy, key=lambda i: -weight[i]):
+        k = load.index(min(load))
+        shares[k].append(i)
+        load[k] += weight[i]
+    idle = [i for i, w in enumerate(weight) if not w]     # flushes and empty passes: cheap, any share
+    shares[load.index(min(load))] += idle
+    return [sorted(s) for s in shares]
+
+
+def _child(machine, share: list[int], conn) -> None:
+    try:
+        timeline = machine.run_share(share)
+        sample = None
+        if machine.partitions is not None and machine.partitions.sample is not None:
+            rows = np.flatnonzero(machine.partitions.sample >= 0)
+            sample = (rows, machine.partitions.sample[rows])
+        conn.send(("ok", timeline, machine.counters(), sample))
+    except BaseException as e:             # reported to the parent, which reruns serially
+        conn.send(("failed", f"{type(e).__name__}: {e}", None, None))
+    finally:
+        conn.close()
+
+
+def run_shares(machine, shares: list[list[int]]) -> bool:
+    """Replay ``shares`` in parallel into ``machine`` (left untouched on failure); whether it succeeded."""
+    ctx = multiprocessing.get_context("fork")
+    procs = []
+    try:
+        for share in shares:
+            recv, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_child, args=(machine, share, send), daemon=True)
+            proc.start()
+            send.close()
+            procs.append((proc, recv))
+        got = []
+        for proc, recv in procs:
+            try:
+                got.append(recv.recv())
+            except EOFError:               # the process died without a word (killed, out of memory)
+                got.append(("failed", "worker exited", None, None))
+    finally:
+        for proc, recv in procs:
+            recv.close()
+            proc.join()
+    if any(g[0] != "ok" for g in got):
+        return False
+    _merge(machine, shares, got)
+    return True
+
+
+def _merge(machine, shares, got) -> None:
+    n = len(machine.prog.passes)
+    local_start, cycles = [0] * n, [0] * n
+    for share, (_, timeline, _, _) in zip(shares, got):
+        for i, (start, c) in zip(share, timeline):
+            local_start[i], cycles[i] = start, c
+    start = np.r_[0, np.cumsum(cycles)].astype(np.int64)
+    for i in range(n):                     # the guard, as a serial run would have met it
+        machine._guard_max(int(start[i + 1]), i)
+    for _, _, counters, _ in got:
+        machine.merge_counters(counters)
+    parts = machine.partitions
+    if parts is not None and parts.sample is not None:
+        _, _, wi_row = machine.prog.storage(MEM)
+        shift = start[:-1] - np.asarray(local_start, np.int64)
+        for _, _, _, (rows, values) in got:
+            parts.sample[rows] = values + shift[machine.prog.wi_pass[wi_row[rows]]]
+    machine.pass_cycles = cycles
+    machine.now = int(start[-1])
+    machine.finished = True
