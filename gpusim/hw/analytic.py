@@ -33,6 +33,7 @@ import numpy as np
 from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, thread_mapping
 from gpusim.hw.machine import flush_cycles
 from gpusim.hw.memory import SECTOR
+from gpusim.hw.units import address_ids
 from gpusim.schemes.opstream import OPS, _Range
 
 
@@ -45,14 +46,8 @@ def _distinct(a: np.ndarray) -> int:
 
 def _hottest(addr: np.ndarray) -> int:
     """Most operations on one address."""
-    if not len(addr):
-        return 0
-    lo, hi = int(addr.min()), int(addr.max())
-    if hi - lo <= 8 * len(addr):
-        return int(np.bincount(addr - lo).max())
-    s = np.sort(addr)
-    edges = np.flatnonzero(np.r_[True, s[1:] != s[:-1], True])
-    return int(np.diff(edges).max())
+    ops = address_ids(addr)[1]
+    return int(ops.max()) if len(ops) else 0
 
 
 def _warp_max(values: np.ndarray, ws: int) -> np.ndarray:
@@ -103,6 +98,7 @@ def analytic_timing(result, work, gpu) -> dict:
     last_producer: dict[int, int | None] = {}
     waited: dict[int, bool] = {}
     chain: dict[int, np.ndarray] = {}     # pass -> dependent-chain cycles per lane key (dense)
+    lane_cache: dict = {}                 # pass -> [(threads, (lanes, lane keys, threads per lane, present, warp max))]
     for g in plan.groups:
         n = len(g.thread)
         thread = np.arange(n) if isinstance(g.thread, _Range) else g.thread
@@ -122,17 +118,24 @@ def analytic_timing(result, work, gpu) -> dict:
             lanes_sel, counts = (li, cnt) if sel is None else (li[sel], cnt[sel])
             lanes = thread if sel is None else thread[lanes_sel]
             used[p].add(cls)
-            if thread_mapping(gpu, plan.passes[p]) == "triangle":
-                lanes = work.frag_prim[lanes]
-            # per lane: operations, and the group's threads it runs (several fragments of one triangle)
-            size = int(lanes.max()) + 1
-            threads_in = np.bincount(lanes, minlength=size)
+            # per lane: the group's threads it runs (several fragments of one triangle); groups of one pass on
+            # the same threads (a thread's successive operations) share it
+            cached = lane_cache.setdefault(p, []) if sel is None else []
+            got = next((v for th, v in cached if len(th) == n and np.array_equal(th, thread)), None)
+            if got is None:
+                if thread_mapping(gpu, plan.passes[p]) == "triangle":
+                    lanes = work.frag_prim[lanes]
+                size = int(lanes.max()) + 1
+                threads_in = np.bincount(lanes, minlength=size)
+                present = np.flatnonzero(threads_in)
+                got = (lanes, size, threads_in, present, _warp_max(threads_in[present], ws).sum())
+                cached.append((thread, got))
+            lanes, size, threads_in, present, warp_threads = got
             c0 = int(counts[0]) if len(counts) else 0
             uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
             per_lane = threads_in * c0 if uniform else np.bincount(lanes, weights=counts, minlength=size)
-            present = np.flatnonzero(threads_in)
             # warp instructions: lanes in order, each warp issues its busiest lane's count
-            wis[p] += _warp_max(per_lane[present], ws).sum()
+            wis[p] += warp_threads * c0 if uniform else _warp_max(per_lane[present], ws).sum()
             ops = float(counts.sum())
             # first operation of each thread: coalescing (on a spread sample of warps) and the hottest address
             if cls == MEM:

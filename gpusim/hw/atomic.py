@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.hw.lower import ATOMIC, Program
-from gpusim.hw.units import FP, Unit, UnitStat, div, fp_costs, mod
+from gpusim.hw.units import FP, Unit, UnitStat, address_ids, div, fp_costs, mod
 
 
 class AtomicUnits(Unit):
@@ -51,18 +51,7 @@ class AtomicUnits(Unit):
         self.cl = np.r_[0, np.cumsum(nops[hit])].tolist()
         if len(cell) > 1 and not (cell[1:] >= cell[:-1]).all():
             addr = addr[np.argsort(cell, kind="stable")]
-        # each lane's address as a small integer id (dense when the addresses are close together)
-        lo = int(addr.min()) if len(addr) else 0
-        if len(addr):
-            ids = addr - lo
-            common = int(np.bitwise_or.reduce(ids))      # shift out the low address bits no lane uses
-            ids >>= (common & -common).bit_length() - 1 if common else 0
-        if len(addr) and int(ids.max()) <= 16 * len(addr):
-            self.addr_ops = np.bincount(ids)
-            self.addr_ops = self.addr_ops[self.addr_ops > 0]
-        else:
-            uniq, ids = np.unique(addr, return_inverse=True)
-            self.addr_ops = np.bincount(ids, minlength=len(uniq))
+        ids, self.addr_ops = address_ids(addr)           # operations per address: for the stats
         self.ids = ids.tolist()
         self.addr_free = [0] * (int(ids.max()) + 1 if len(ids) else 0)      # cycles
 

@@ -100,3 +100,23 @@ def div(a, d: int):
 def mod(a, d: int):
     """``a % d`` for non-negative integer arrays (a mask when ``d`` is a power of two)."""
     return a & (d - 1) if d & (d - 1) == 0 else a % d
+
+
+def address_ids(addr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each address as a small integer id, and the operations per distinct address.
+
+    Dense (offset from the lowest address, the low bits no address uses shifted
+    out: byte addresses of 4-byte words become word numbers) when the addresses
+    lie close together; otherwise ranks among the distinct addresses (a sort).
+    """
+    if not len(addr):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    ids = addr - int(addr.min())
+    common = int(np.bitwise_or.reduce(ids))
+    if common:
+        ids = ids >> ((common & -common).bit_length() - 1)
+    if int(ids.max()) <= 16 * len(ids):
+        ops = np.bincount(ids)
+        return ids, ops[ops > 0]
+    uniq, ids = np.unique(addr, return_inverse=True)
+    return ids, np.bincount(ids, minlength=len(uniq))
