@@ -41,7 +41,7 @@ class AtomicUnits(Unit):
         nops = np.bincount(cell, minlength=program.instructions * P) if len(cell) else np.zeros(0, np.int64)
         hit = np.flatnonzero(nops)
         cost = fp_costs(nops[hit], c.ops_per_cycle)
-        k_wi, k_p = hit // P, hit % P
+        k_wi, k_p = div(hit, P), mod(hit, P)
         self.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
         self.requests = np.bincount(k_p, weights=nops[hit], minlength=P).astype(np.int64).tolist()
         # flat lists: instruction wi owns cells po[wi]:po[wi + 1]; cell j its lanes' addresses ids[cl[j]:cl[j + 1]],

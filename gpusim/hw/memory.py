@@ -139,11 +139,11 @@ class Partitions:
                 n_ = np.bincount(cell, minlength=span)
                 hit = np.flatnonzero(n_)
                 cells.append(hit + r0 * P)
-                nbs.append(b_[hit])
+                nbs.append(b_[hit].astype(np.int64))     # whole bytes
                 nreqs.append(n_[hit])
             hit, nb, nreq = np.concatenate(cells), np.concatenate(nbs), np.concatenate(nreqs)
             cost = fp_costs(nb, gpu.dram.bytes_per_cycle)
-            k_rank, k_p = hit // P, hit % P      # (instruction, partition) cells with requests, in storage order
+            k_rank, k_p = div(hit, P), mod(hit, P)      # (instruction, partition) cells with requests, in storage order
             self.dram.requests = np.bincount(k_p, weights=nreq, minlength=P).astype(np.int64).tolist()
             self.dram.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
             # instruction wi owns cells lo[wi]:hi[wi] (kp: partition, kc: sub-cycles)

@@ -24,8 +24,12 @@ def fp_cost(work: float, rate: float) -> int:
 
 
 def fp_costs(work, rate: float):
-    """:func:`fp_cost` of an array of work amounts (int64)."""
-    return np.maximum(1, np.ceil(np.asarray(work) * FP / rate)).astype(np.int64)
+    """:func:`fp_cost` of an array of whole work amounts (int64); a table lookup when they are small."""
+    work = np.asarray(work)
+    top = int(work.max()) if work.size else 0
+    if work.size > 4 * top and work.dtype.kind in "iu":
+        return fp_costs(np.arange(top + 1, dtype=np.float64), rate)[work]
+    return np.maximum(1, np.ceil(work * FP / rate)).astype(np.int64)
 
 
 def cycles(fp: int) -> int:
