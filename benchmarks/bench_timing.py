@@ -10,13 +10,15 @@
    Printed as fragments/s and as the ratio full / analytic, measured in this run.
 2. Relative results (FreePipe Table 3, k-buffer Table 1) on ``nested-spheres``
    rendered at 256 x 256 (depth complexity 20), written as a markdown table
-   with every fidelity level's cycles and its wall time.
+   with every fidelity level's cycles and its wall time: once with the
+   spheres' tessellation scaled with the resolution (triangles as small in
+   pixels as at the scene's own 96 x 96, like FreePipe's scanned meshes), once
+   with the scene's own tessellation (FreePipe's schemes and depth peeling).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -33,10 +35,22 @@ RUNS = [("freepipe-abuffer", {}), ("freepipe-mdts", {}), ("depth-peeling", {}), 
         ("kbuffer", {"k": 16, "hw": "scoreboard"}), ("kbuffer", {"k": 16, "hw": "blender"})]
 
 
-def scene_trace(name, size):
-    scene, base = load_scene(name)
-    scene = dataclasses.replace(scene, screen=dataclasses.replace(scene.screen, width=size, height=size))
-    return trace_scene(scene, base)
+def scene_trace(name, size, refine: bool = False):
+    """``name`` rendered at ``size`` x ``size``; ``refine``: its spheres' tessellation scaled with the size,
+    so triangles keep the size in pixels they have at the scene's own resolution."""
+    return trace_scene(*load_scene(name, scene_overrides(name, size, refine)))
+
+
+def scene_overrides(name, size, refine: bool = False) -> list[str]:
+    """The ``--set`` overrides behind :func:`scene_trace` (the CLI reproduces a run with them)."""
+    scene, _ = load_scene(name)
+    out = [f"screen.width={size}", f"screen.height={size}"]
+    if refine:
+        f = size / scene.screen.width
+        for i, o in enumerate(scene.objects):
+            if hasattr(o, "segments"):
+                out += [f"objects.{i}.segments={round(o.segments * f)}", f"objects.{i}.rings={round(o.rings * f)}"]
+    return out
 
 
 def throughput(size: int, repeat: int = 3) -> bool:
@@ -67,25 +81,41 @@ def throughput(size: int, repeat: int = 3) -> bool:
 
 
 def relative(size: int, report: Path | None) -> None:
-    trace = scene_trace("nested-spheres", size)
     gpu = load_gpu("gtx280")
-    depth = int(trace.depth_complexity().max())
-    lines = [f"# Timing model: relative results on nested-spheres at {size}x{size}", "",
-             f"{len(trace):,} fragments, depth complexity up to {depth}, GPU `gtx280`. "
-             "Cycles per fidelity level (wall seconds in brackets); hazards from the full model.", "",
-             "| scheme | params | full | sampled | analytic | RMW hazards |", "|---|---|---|---|---|---|"]
-    for scheme, params in RUNS:
-        result = make_scheme(scheme, params).run(trace)
-        cells = {}
-        for level in ("full", "sampled", "analytic"):
-            start = time.perf_counter()
-            rec, _ = FIDELITIES[level](result, trace, gpu)
-            cells[level] = (rec["cycles"], time.perf_counter() - start, rec.get("rmw_hazards"))
-        row = (f"| {scheme} | {params or ''} | " + " | ".join(f"{cells[l][0]:,} ({cells[l][1]:.1f} s)"
-                                                            for l in ("full", "sampled", "analytic"))
-               + f" | {cells['full'][2]:,} |")
-        print(row)
-        lines.append(row)
+    lines = [f"# Timing model: relative results on nested-spheres at {size}x{size}", ""]
+    for refine in (True, False):
+        trace = scene_trace("nested-spheres", size, refine)
+        depth = int(trace.depth_complexity().max())
+        sets = " ".join(f"--set {o}" for o in scene_overrides("nested-spheres", size, refine))
+        title = ("Triangles as small as at 96x96 (tessellation scaled with the resolution), as FreePipe's "
+                 "scanned meshes" if refine else "The scene's own tessellation: triangles 7x larger in pixels")
+        lines += [f"## {title}", "", f"{len(trace):,} fragments from {int(trace.prim.max()) + 1:,} "
+                  f"triangles, depth complexity up to {depth}, GPU `gtx280`; `gpusim trace nested-spheres "
+                  f"{sets}`. Cycles per fidelity level (wall seconds in brackets); hazards from the full model.",
+                  "", "| scheme | params | full | sampled | analytic | RMW hazards |", "|---|---|---|---|---|---|"]
+        full = {}
+        for scheme, params in (RUNS if refine else RUNS[:3]):
+            result = make_scheme(scheme, params).run(trace)
+            cells = {}
+            for level in ("full", "sampled", "analytic"):
+                start = time.perf_counter()
+                rec, _ = FIDELITIES[level](result, trace, gpu)
+                cells[level] = (rec["cycles"], time.perf_counter() - start, rec.get("rmw_hazards"))
+            full[scheme, str(params)] = cells["full"][0]
+            row = (f"| {scheme} | {params or ''} | "
+                   + " | ".join(f"{cells[v][0]:,} ({cells[v][1]:.1f} s)" for v in ("full", "sampled", "analytic"))
+                   + f" | {cells['full'][2]:,} |")
+            print(row)
+            lines.append(row)
+        peel, abuf, mdts = (full["depth-peeling", "{}"], full["freepipe-abuffer", "{}"],
+                            full["freepipe-mdts", "{}"])
+        lines += ["", f"Depth peeling / A-buffer: {peel / abuf:.1f}x; depth peeling / MDTS: {peel / mdts:.1f}x "
+                  f"(FreePipe Table 3: about the depth complexity, {depth}).", ""]
+        print(lines[-2])
+    lines += ["With large triangles a FreePipe thread walks many fragments' atomicMin chains one after the "
+              "other: the longest thread, not the atomic units, sets MDTS's time, and depth peeling (bound "
+              "by the rasterizer, which sees few triangles) overtakes it. FreePipe's advantage is a property "
+              "of scenes of many small triangles, as its Table 3 meshes are.", ""]
     if report is not None:
         write_text_atomic(report, "\n".join(lines) + "\n")
         print(f"wrote {report}")

@@ -117,6 +117,21 @@ def test_max_cycles_guard():
         simulate(plan, {"a": 3200 * 64}, 3200, ["runner.max_cycles=1000"])
 
 
+def test_rasterizer_takes_the_triangles_a_pass_submits():
+    # two fragments of triangles 500 and 501 of a 1,000-triangle scene, 1 triangle/cycle: a pass submitting the
+    # whole scene lasts the 1,000 cycles of rasterizing it; a batch of the two triangles only waits for them
+    # (ready at cycle 2, one 32-byte request: 1 cycle, + 100 latency)
+    def run(primitives):
+        plan = OpPlan([Pass("draw", "geometry", "fragment", primitives=primitives)], ["a"])
+        plan.add(0, "store", "a", 2, 1, lambda i, s: i * 4, 4)
+        gpu = load_gpu("gtx280", SIMPLE + ["raster.triangles_per_cycle=1.0"])
+        work = Workload(plan, layout_bases(plan.structures, {"a": 8}), 64, 64, np.zeros(2, np.int64),
+                        np.array([500, 501]), triangles=1000)
+        return Machine(gpu, lower(work, gpu), 64).run()
+    assert run(None) == 1000
+    assert run(2) == 2 + 1 + 100
+
+
 def test_scoreboard_serializes_a_pixel():
     # 64 fragments of one pixel, each: dispatch, a load and a store. One in flight at a time.
     plan = compute_plan(["k"])

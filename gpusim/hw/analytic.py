@@ -206,7 +206,8 @@ def analytic_timing(result, work, gpu) -> dict:
         }
         mapping = thread_mapping(gpu, pk)
         if mapping == "fragment":          # the fixed-function rasterizer sees every triangle
-            bounds["raster"] = work.triangles / gpu.raster.triangles_per_cycle
+            tris = pk.primitives if pk.primitives is not None else work.triangles
+            bounds["raster"] = tris / gpu.raster.triangles_per_cycle
         elif mapping == "triangle":        # software setup on the SMs
             bounds["issue"] += np.ceil(n_warps / min(c.sms, n_warps)) * gpu.raster.setup_instructions * c.issue_cycles
         limit = max(bounds, key=bounds.get)

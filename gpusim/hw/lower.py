@@ -86,6 +86,7 @@ class PassProgram:
     flush_warps: int = 0           # ALU-only warps of a flush pass (a full-screen quad, no memory ops)
     warp_triangles: np.ndarray | None = None   # fixed-function rasterizer: triangles rasterized before each
                                                # warp's fragments are all out (its last triangle + 1)
+    triangles: int = 0             # triangles the fixed-function rasterizer takes in the pass
     setup_cycles: int = 0          # issue cycles of software triangle setup at each warp's start
     operations: int = 0            # operations lowered (after any sampling)
     operations_total: int = 0      # operations of the pass in the plan
@@ -364,7 +365,8 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         if mode == "fragment":           # the fixed-function rasterizer feeds the warps in triangle order
             first_lane = (np.arange(0, n_lanes, ws) if warp_of_lane is None
                           else np.searchsorted(warp_of_lane, np.arange(n_warps)))
-            pp.warp_triangles = np.maximum.reduceat(work.frag_prim[lane_keys] + 1, first_lane)
+            pp.triangles, position = _raster_positions(work, pk, lane_keys)
+            pp.warp_triangles = np.maximum.reduceat(position, first_lane)
         elif mode == "triangle":
             pp.setup_cycles = gpu.raster.setup_instructions * gpu.core.issue_cycles
         pp.wi_start = np.arange(n_warps + 1) + warp0       # global warp numbers; made instruction offsets below
@@ -418,6 +420,28 @@ def _place(pc: _Piece, key, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps: 
         hi, w = hi[order], w[order]
         j = None if j is None else j[order]
     return order, hi, w, j, np.flatnonzero(np.r_[True, hi[1:] != hi[:-1]])
+
+
+def _raster_positions(work: Workload, pk, lane_keys: np.ndarray) -> tuple[int, np.ndarray]:
+    """Triangles the rasterizer takes in a graphics-pipeline geometry pass, and for each lane (fragment, in
+    submission order) how many of them are rasterized by the time its own is.
+
+    A pass submits the whole scene unless the scheme says it submits fewer
+    (``Pass.primitives``: a batch). Primitive ids are the positions when the
+    fragments come in primitive order over the whole scene (exact, triangles
+    without fragments included); otherwise a primitive's position is the
+    order of its first fragment, spread over the pass's triangles.
+    """
+    prim = work.frag_prim[lane_keys]
+    if pk.primitives is None and (len(prim) < 2 or bool((prim[1:] >= prim[:-1]).all())):
+        return work.triangles, prim + 1
+    total = pk.primitives if pk.primitives is not None else work.triangles
+    _, first, inverse = np.unique(prim, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first)] = np.arange(1, len(first) + 1)
+    seq = rank[inverse]
+    distinct = int(seq[-1]) if len(seq) else 1
+    return total, -(-seq * max(total, distinct) // distinct)
 
 
 def _scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:

@@ -20,7 +20,8 @@ waits for it, and other warps of the SM issue meanwhile (latency hiding).
 Geometry passes of the graphics pipeline get their fragments from a
 fixed-function rasterizer (``raster.triangles_per_cycle``): a warp starts once
 the triangles of its fragments are rasterized, and the pass lasts at least as
-long as rasterizing every triangle (each depth-peeling pass pays it again). A
+long as rasterizing every triangle it submits (each depth-peeling pass pays the
+whole scene again; a batch of the k-buffer's heuristic only its own). A
 software rasterizer (the ``triangle`` mapping) instead issues
 ``raster.setup_instructions`` per triangle in its thread.
 
@@ -195,7 +196,7 @@ class Machine:
         min_end = start
         if p.warp_triangles is not None:      # the fixed-function rasterizer
             ready = (start + np.ceil(p.warp_triangles / rate).astype(np.int64)).tolist()
-            min_end = start + math.ceil(self.prog.triangles / rate)
+            min_end = start + math.ceil(p.triangles / rate)
         wi_start = p.wi_start.tolist()
         for sm in range(min(sms, p.warps)):
             waiting = deque(range(sm, p.warps, sms))

@@ -53,7 +53,7 @@ from gpusim.schemes.depth_filter import emit_order
 from gpusim.schemes.groups import PixelGroups
 from gpusim.schemes.kbuffer_replay import make_replay
 from gpusim.schemes.opstream import OpPlan, Pass
-from gpusim.schemes.reorder import batch_index, centroid_order, permuted
+from gpusim.schemes.reorder import batch_index, batch_primitives, centroid_order, permuted
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 
@@ -87,10 +87,11 @@ class KBuffer(Scheme):
         if self.batch:
             batches = batch_index(t, np.arange(n), self.batch)
             n_batches = int(batches.max()) + 1 if n else 0
+            prims = batch_primitives(t, batches, n_batches)
             for b in range(n_batches):
                 if b:
                     passes.append(Pass(f"flush {b}", "flush", "none"))
-                passes.append(Pass(f"capture batch {b}", "geometry", "fragment"))
+                passes.append(Pass(f"capture batch {b}", "geometry", "fragment", primitives=int(prims[b])))
             frag_pass = 1 + 2 * batches
         else:
             n_batches = 1

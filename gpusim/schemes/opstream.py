@@ -70,13 +70,15 @@ class Pass:
     """One pass of a scheme: ``kind`` in PASS_KINDS, ``threads`` in THREAD_KINDS.
 
     ``software``: the pass is a compute kernel (a software rasterizer), not the
-    graphics pipeline.
+    graphics pipeline. ``primitives``: primitives a geometry pass submits
+    (None: the whole scene; a batch of the k-buffer's heuristic submits its own).
     """
 
     name: str
     kind: str
     threads: str
     software: bool = False
+    primitives: int | None = None
 
     def __post_init__(self):
         if self.kind not in PASS_KINDS or self.threads not in THREAD_KINDS:

@@ -37,6 +37,12 @@ def batch_index(trace: FragmentTrace, order: np.ndarray, batch_size: int) -> np.
     return prim_seq // batch_size
 
 
+def batch_primitives(trace: FragmentTrace, batches: np.ndarray, n_batches: int) -> np.ndarray:
+    """Primitives in each batch (``batches``: each fragment's batch, fragments in submission order)."""
+    new_prim = np.r_[True, trace.prim[1:] != trace.prim[:-1]] if len(trace) else np.zeros(0, bool)
+    return np.bincount(batches[new_prim], minlength=n_batches)
+
+
 def permuted(trace: FragmentTrace, order: np.ndarray) -> FragmentTrace:
     """The trace with its fragments in ``order``."""
     return FragmentTrace(trace.x[order], trace.y[order], trace.z[order], trace.rgba[order],
