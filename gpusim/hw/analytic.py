@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, thread_mapping
+from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, split_by, thread_mapping
 from gpusim.hw.machine import flush_cycles
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.units import address_ids
@@ -97,8 +97,9 @@ def analytic_timing(result, work, gpu) -> dict:
     used: list[set] = [set() for _ in range(n_pass)]
     last_producer: dict[int, int | None] = {}
     waited: dict[int, bool] = {}
-    chain: dict[int, np.ndarray] = {}     # pass -> dependent-chain cycles per lane key (dense)
-    lane_cache: dict = {}                 # pass -> [(threads, (lanes, lane keys, threads per lane, present, warp max))]
+    chain: dict[int, tuple] = {}          # pass -> (first lane key, dependent-chain cycles per lane key from it)
+    lane_cache: dict = {}                 # pass -> [(threads, (lanes, first key, keys, threads per lane, present,
+                                          #                     warp max))]
     for g in plan.groups:
         n = len(g.thread)
         thread = np.arange(n) if isinstance(g.thread, _Range) else g.thread
@@ -106,13 +107,13 @@ def analytic_timing(result, work, gpu) -> dict:
         cls, produces = int(OP_CLASS[op]), bool(OP_PRODUCES[op])
         if g.pass_fn is not None:
             gp, li, cnt = _expand_pass(g, n)
-            split = [(p, gp == p) for p in np.unique(gp).tolist()]
+            split = split_by(gp)
         elif np.isscalar(g.pass_index):
             li, cnt = np.arange(n), g.count
             split = [(int(g.pass_index), None)]
         else:
             li, cnt = np.arange(n), g.count
-            split = [(p, g.pass_index == p) for p in np.unique(g.pass_index).tolist()]
+            split = split_by(np.asarray(g.pass_index, np.int64))
         nb = g.bytes if not callable(g.bytes) else None
         for p, sel in split:
             lanes_sel, counts = (li, cnt) if sel is None else (li[sel], cnt[sel])
@@ -125,15 +126,16 @@ def analytic_timing(result, work, gpu) -> dict:
             if got is None:
                 if thread_mapping(gpu, plan.passes[p]) == "triangle":
                     lanes = work.frag_prim[lanes]
-                size = int(lanes.max()) + 1
-                threads_in = np.bincount(lanes, minlength=size)
+                lo = int(lanes.min())           # lane keys from lo (a batch's fragments are a slice of them)
+                size = int(lanes.max()) + 1 - lo
+                threads_in = np.bincount(lanes - lo, minlength=size)
                 present = np.flatnonzero(threads_in)
-                got = (lanes, size, threads_in, present, _warp_max(threads_in[present], ws).sum())
+                got = (lanes, lo, size, threads_in, present, _warp_max(threads_in[present], ws).sum())
                 cached.append((thread, got))
-            lanes, size, threads_in, present, warp_threads = got
+            lanes, lo, size, threads_in, present, warp_threads = got
             c0 = int(counts[0]) if len(counts) else 0
             uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
-            per_lane = threads_in * c0 if uniform else np.bincount(lanes, weights=counts, minlength=size)
+            per_lane = threads_in * c0 if uniform else np.bincount(lanes - lo, weights=counts, minlength=size)
             # warp instructions: lanes in order, each warp issues its busiest lane's count
             wis[p] += warp_threads * c0 if uniform else _warp_max(per_lane[present], ws).sum()
             ops = float(counts.sum())
@@ -168,13 +170,14 @@ def analytic_timing(result, work, gpu) -> dict:
                 add += per_lane * lat[cls]
             elif g.dep and lp is not None and not waited.get(p, False):
                 add += threads_in * lat[lp]
-            have = chain.get(p)
-            if have is None or len(have) < size:
-                grown = np.zeros(size if have is None else max(size, len(have)))
-                if have is not None:
-                    grown[:len(have)] = have
-                have = chain[p] = grown
-            have[:size] += add
+            base, have = chain.get(p, (lo, np.zeros(0)))
+            if lo < base or lo + size > base + len(have):
+                new_base = min(base, lo)
+                grown = np.zeros(max(base + len(have), lo + size) - new_base)
+                grown[base - new_base:base - new_base + len(have)] = have
+                base, have = new_base, grown
+                chain[p] = (base, have)
+            have[lo - base:lo - base + size] += add
             if produces:
                 last_producer[p], waited[p] = cls, False
             elif g.dep:
@@ -189,7 +192,7 @@ def analytic_timing(result, work, gpu) -> dict:
         if p not in chain:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": 0, "warps": 0, "bound": "empty"})
             continue
-        lane_chain = chain[p]
+        lane_chain = chain[p][1]
         lane_chain = lane_chain[lane_chain > 0]       # every lane issues, so a present lane has a chain
         wchain = _warp_max(lane_chain, ws)
         n_warps = len(wchain)

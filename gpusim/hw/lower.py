@@ -225,6 +225,18 @@ class _Piece:
                       self.nbytes if np.isscalar(self.nbytes) else self.nbytes[idx])
 
 
+def split_by(values: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """Each distinct value of an integer array with the indices holding it (ascending), in value order:
+    one stable sort, not one scan per value (a k-buffer batch run has thousands of passes)."""
+    if not len(values):
+        return []
+    order = (np.arange(len(values)) if len(values) < 2 or bool((values[1:] >= values[:-1]).all())
+             else np.argsort(values, kind="stable"))
+    v = values[order]
+    bounds = [0, *(np.flatnonzero(v[1:] != v[:-1]) + 1).tolist(), len(v)]
+    return [(int(v[a]), order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
 def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes."""
     n = len(g.thread)
@@ -247,8 +259,7 @@ def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     pass_of = (np.asarray(g.pass_fn(i, seq), np.int64) if g.pass_fn is not None
                else np.asarray(g.pass_index, np.int64)[i])
     pieces = []
-    for p in np.unique(pass_of).tolist():
-        sel = np.flatnonzero(pass_of == p)
+    for p, sel in split_by(pass_of):
         ii = i[sel]
         # iteration inside this pass: position among the thread's operations of the group in the pass
         first = np.r_[True, ii[1:] != ii[:-1]] if len(ii) else np.zeros(0, bool)
@@ -309,13 +320,15 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             continue
         # lanes of the pass: distinct lane keys in submission order
         keys = [work.frag_prim[pc.thread] if mode == "triangle" else pc.thread for pc in ps]
-        universe = max(int(k.max()) for k in keys) + 1
+        key_lo = min(int(k.min()) for k in keys)         # keys of one pass span part of the range (a batch)
+        universe = max(int(k.max()) for k in keys) + 1 - key_lo
         present = np.zeros(universe, bool)
         for k in keys:
-            present[k] = True
-        lane_keys = np.flatnonzero(present)
+            present[k - key_lo] = True
+        lane_keys = np.flatnonzero(present) + key_lo
         n_lanes = len(lane_keys)
-        rank_of = None if n_lanes == universe else np.cumsum(present) - 1     # None: lane key = rank
+        # each key's lane rank (None: the key is its rank)
+        rank_of = None if n_lanes == universe and not key_lo else np.cumsum(present) - 1
         if any(plan.groups[pc.group].op == "scoreboard" for pc in ps):
             pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
             warp_of_lane = _scoreboard_warps(pix, work.width, gpu)
@@ -345,7 +358,8 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             got = next((pl for th, kk, pl in placed if kk is None and pc.k is None and len(th) == len(pc.thread)
                         and np.array_equal(th, pc.thread)), None)
             if got is None:
-                got = _place(pc, key, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps, ws, lane_bits, pk.name)
+                got = _place(pc, key, key_lo, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps, ws, lane_bits,
+                             pk.name)
                 placed.append((pc.thread, pc.k, got))
             order, hi, w, j, start = got
             if order is not None:
@@ -388,11 +402,11 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                    row_sets, work.frag_pixel, work.triangles)
 
 
-def _place(pc: _Piece, key, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps: int, ws: int, lane_bits: int,
-           name: str):
+def _place(pc: _Piece, key, key_lo: int, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps: int, ws: int,
+           lane_bits: int, name: str):
     """Where the rows of piece ``pc`` go: (row order or None if already in place, instruction key, warp and
     fragment iteration of each row in that order, first row of each instruction)."""
-    r = key if rank_of is None else rank_of[key]
+    r = key if rank_of is None else rank_of[key - key_lo]
     w = div(r, ws) if warp_of_lane is None else warp_of_lane[r]
     j = j_of[pc.thread] if j_of is not None else None
     k = pc.k

@@ -90,6 +90,7 @@ class Machine:
         self.waiting: dict[int, tuple] = {}        # warp -> (pass, SM, instruction, unit) it waits on
         self.pass_cycles: list[int] = []
         self.current_pass = 0
+        self._lists = None
         self.finished = False
 
     # ------------------------------------------------------------------ build
@@ -221,7 +222,7 @@ class Machine:
     def _loop(self, p, wi_start, ready) -> int:
         """Process the queue until the pass's warps are done; the cycle its last operation completes."""
         queue, order = self._queue, self._order
-        cls_of, dep_of, prod_of = self.prog.wi_class.tolist(), self.prog.wi_dep.tolist(), self.prog.wi_produces.tolist()
+        cls_of, dep_of, prod_of = self._instruction_lists()
         sm_free, cost, setup = self.sm_free, self.issue_cost, p.setup_cycles
         mem = self.partitions.access if self.partitions is not None else None
         atom = self.atomics.access if self.atomics is not None else None
@@ -305,6 +306,14 @@ class Machine:
             self.now = last_progress + limit
             raise NoProgress(self.diagnosis(limit))
         return done_all
+
+    def _instruction_lists(self) -> tuple[list, list, list]:
+        """Each instruction's unit class, whether it waits for a result, whether it produces one (as lists,
+        made once: the loop indexes them per instruction)."""
+        if self._lists is None:
+            prog = self.prog
+            self._lists = (prog.wi_class.tolist(), prog.wi_dep.tolist(), prog.wi_produces.tolist())
+        return self._lists
 
     def _wait(self, st, signal: Signal, p, wi: int, unit: str) -> None:
         st[PHASE] = ISSUE                      # retry the same instruction when the unit signals

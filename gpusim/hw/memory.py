@@ -96,7 +96,9 @@ class Partitions:
         self.l2_free = [0] * m.partitions
         self.bytes_read = self.bytes_written = 0
         self.dram_lat = gpu.dram.latency
-        self.sample = None      # rmw rows: the cycle each was served (None without unsynchronised RMW)
+        # rmw instructions: the sub-cycle each partition started serving them (None without unsynchronised RMW)
+        self.rmw_starts: dict[int, list] | None = None
+        self.prog = program
         # access(wi, t): serve instruction wi issued at cycle t; the cycle its last request is back at the core
         self.access = self._l2_path
         self._build(program)
@@ -117,16 +119,13 @@ class Partitions:
         rmw_op[[RMW_READ, RMW_WRITE]] = True
         rmw = rmw_op[prog.wi_op]
         if rmw.any():
-            self.sample = np.full(len(R), -1, np.int64)
+            self.rmw_starts = {}
         chunks = [q for part, off in zip(R.parts, R.offsets()) for q in self._requests(part, off, los, counts, m)]
         self.bytes_written = sum(int(nb[write[wis[rank]]].sum()) for rank, _, nb in chunks)
         self.bytes_read = sum(int(nb.sum()) for _, _, nb in chunks) - self.bytes_written
 
         def part_of(seg):
             return mod(div(seg * m.segment_bytes, m.interleave_bytes), P)
-
-        def row_part(r: slice):
-            return mod(div(R.address[r], m.interleave_bytes), P)
 
         if self.l2 is None:
             # bytes, cost and requests per (instruction, partition), chunk by chunk (dense over the chunk)
@@ -150,8 +149,8 @@ class Partitions:
             bounds = np.searchsorted(k_rank, np.arange(len(wis) + 1))
             lo, hi = np.zeros(prog.instructions, np.int64), np.zeros(prog.instructions, np.int64)
             lo[wis], hi[wis] = bounds[:-1], bounds[1:]
-            rmw_rows = {wi: (prog.rows(wi), row_part(prog.rows(wi))) for wi in np.flatnonzero(rmw).tolist()}
-            self.access = self._dram_access(lo.tolist(), hi.tolist(), k_p.tolist(), cost.tolist(), rmw_rows)
+            rmw_wis = set(np.flatnonzero(rmw).tolist())
+            self.access = self._dram_access(lo.tolist(), hi.tolist(), k_p.tolist(), cost.tolist(), rmw_wis)
             return
         req_rank, req_seg, req_bytes = (np.concatenate(c) for c in zip(*chunks))
         req_wi = wis[req_rank]
@@ -162,9 +161,7 @@ class Partitions:
         for j in range(len(bounds) - 1):
             a, b = bounds[j], bounds[j + 1]
             wi = int(req_wi[a])
-            r = prog.rows(wi) if rmw[wi] else None
-            self.table[wi] = ((req_part[a:b], lines[a:b], req_bytes[a:b]), bool(write[wi]),
-                              (r, row_part(r)) if r is not None else None)
+            self.table[wi] = ((req_part[a:b], lines[a:b], req_bytes[a:b]), bool(write[wi]), bool(rmw[wi]))
 
     @staticmethod
     def _requests(part, off: int, los: np.ndarray, counts: np.ndarray, m, chunk: int = 1 << 20):
@@ -211,16 +208,29 @@ class Partitions:
         entry, write, rmw = self.table[wi]
         starts: dict = {}
         done = self._l2_access(entry, write, (t + self.icn) * FP, starts)
-        if rmw is not None:
-            self._sample(rmw, [starts.get(p, 0) for p in range(len(self.dram_free))])
+        if rmw:
+            self.rmw_starts[wi] = [starts.get(p, 0) for p in range(len(self.dram_free))]
         return done + self.icn
 
-    def _sample(self, rmw, starts: list) -> None:
-        """RMW rows sample memory (reads) or land (writes) when their partition starts serving them."""
-        r, parts = rmw
-        self.sample[r] = -(-np.asarray(starts, np.int64)[parts] // FP)
+    def sample(self) -> np.ndarray | None:
+        """Per row of the memory instructions: the cycle an ``rmw_read`` sampled memory or an ``rmw_write``
+        landed (its partition started serving it), -1 for other rows; None without RMW instructions."""
+        if self.rmw_starts is None:
+            return None
+        prog = self.prog
+        R = prog.rows_of(MEM)
+        out = np.full(len(R), -1, np.int64)
+        if self.rmw_starts:
+            wis = np.fromiter(self.rmw_starts, np.int64, len(self.rmw_starts))
+            starts = np.array(list(self.rmw_starts.values()), np.int64)
+            lo, counts = prog.row_lo[wis], prog.row_hi[wis] - prog.row_lo[wis]
+            k = np.repeat(np.arange(len(wis)), counts)
+            rows = np.arange(len(k)) - np.repeat(np.cumsum(counts) - counts, counts) + lo[k]
+            part = mod(div(R.address[rows], self.gpu.memory.interleave_bytes), self.gpu.memory.partitions)
+            out[rows] = -(-starts[k, part] // FP)
+        return out
 
-    def _dram_access(self, lo: list, hi: list, kp: list, kc: list, rmw_rows: dict):
+    def _dram_access(self, lo: list, hi: list, kp: list, kc: list, rmw_wis: set):
         """``access`` without an L2: instruction ``wi``'s cells ``lo[wi]:hi[wi]`` (partition ``kp``, sub-cycles
         ``kc``), each served by its channel back to back; a closure over locals, as it runs once per
         instruction."""
@@ -241,17 +251,17 @@ class Partitions:
                     end = e
             return -(-end // FP) + tail
 
-        if not rmw_rows:
+        if not rmw_wis:
             return access
+        rmw_starts = self.rmw_starts
 
         def access_rmw(wi: int, t: int) -> int:
-            rmw = rmw_rows.get(wi)
-            if rmw is not None:
+            if wi in rmw_wis:
                 arrive = (t + icn) * FP
                 starts = [0] * len(free)
                 for j in range(lo[wi], hi[wi]):
                     starts[kp[j]] = max(arrive, free[kp[j]])
-                self._sample(rmw, starts)
+                rmw_starts[wi] = starts
             return access(wi, t)
 
         return access_rmw

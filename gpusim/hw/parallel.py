@@ -6,7 +6,7 @@ passes can be split into shares, each share replayed in its own process on a
 copy of the freshly built machine (``fork``: nothing is pickled on the way
 in), and the results put back in pass order. The figures are identical to a
 serial run: each pass's cycles, the counters the units keep (merged), and the
-RMW sample times (shifted from the share's timeline to the whole run's).
+RMW start times (shifted from the share's timeline to the whole run's).
 
 ``runner.workers`` sets the processes: 1 is serial; N >= 2 uses up to N
 whenever two passes have work; 0 (the default) uses one per available CPU
@@ -26,7 +26,7 @@ import threading
 
 import numpy as np
 
-from gpusim.hw.lower import MEM
+from gpusim.hw.units import FP
 
 MIN_INSTRUCTIONS = 50_000     # warp instructions below which auto mode stays serial (a fork costs ~10-50 ms)
 MAX_SHARE = 0.85              # auto mode stays serial when one pass holds this share of the instructions
@@ -75,11 +75,8 @@ def plan_shares(machine) -> list[list[int]]:
 def _child(machine, share: list[int], conn) -> None:
     try:
         timeline = machine.run_share(share)
-        sample = None
-        if machine.partitions is not None and machine.partitions.sample is not None:
-            rows = np.flatnonzero(machine.partitions.sample >= 0)
-            sample = (rows, machine.partitions.sample[rows])
-        conn.send(("ok", timeline, machine.counters(), sample))
+        rmw = machine.partitions.rmw_starts if machine.partitions is not None else None
+        conn.send(("ok", timeline, machine.counters(), rmw))
     except BaseException as e:             # reported to the parent, which reruns serially
         conn.send(("failed", f"{type(e).__name__}: {e}", None, None))
     finally:
@@ -125,11 +122,13 @@ def _merge(machine, shares, got) -> None:
     for _, _, counters, _ in got:
         machine.merge_counters(counters)
     parts = machine.partitions
-    if parts is not None and parts.sample is not None:
-        _, _, wi_row = machine.prog.storage(MEM)
-        shift = start[:-1] - np.asarray(local_start, np.int64)
-        for _, _, _, (rows, values) in got:
-            parts.sample[rows] = values + shift[machine.prog.wi_pass[wi_row[rows]]]
+    if parts is not None and parts.rmw_starts is not None:
+        shift = ((start[:-1] - np.asarray(local_start, np.int64)) * FP).tolist()     # sub-cycles, per pass
+        wi_pass = machine.prog.wi_pass
+        for _, _, _, rmw in got:
+            for wi, starts in rmw.items():
+                d = shift[wi_pass[wi]]
+                parts.rmw_starts[wi] = [x + d for x in starts]     # untouched partitions are never read
     machine.pass_cycles = cycles
     machine.now = int(start[-1])
     machine.finished = True

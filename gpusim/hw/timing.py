@@ -41,9 +41,10 @@ def _finish(rec: dict, gpu, cycles: int) -> dict:
 def _hazards(rec: dict, program: Program, machine: Machine, work: Workload, result, reference, scale=1.0):
     """RMW hazards from the event times, and the image replayed in event order."""
     rec["rmw_hazards"], rec["rmw_hazard_pixels"] = 0, 0
-    if machine.partitions is None or machine.partitions.sample is None or not (machine.partitions.sample >= 0).any():
+    sample = machine.partitions.sample() if machine.partitions is not None else None
+    if sample is None or not (sample >= 0).any():
         return None
-    read, write = rmw_windows(program, machine.partitions.sample, len(work.frag_pixel))
+    read, write = rmw_windows(program, sample, len(work.frag_pixel))
     h, hp = count_hazards(work.frag_pixel, read, write)
     rec["rmw_hazards"], rec["rmw_hazard_pixels"] = int(round(h * scale)), int(round(hp * scale))
     replay = result.extras.get("rmw_replay") if result is not None else None
