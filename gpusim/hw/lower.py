@@ -55,19 +55,42 @@ class Workload:
     scheme's submission order).
     """
 
-    def __init__(self, plan: OpPlan, bases: dict[str, int], width: int, height: int, frag_pixel: np.ndarray,
-                 frag_prim: np.ndarray, result=None, triangles: int | None = None):
+    def __init__(self, plan: OpPlan, bases: dict[str, int], width: int, height: int, frag_pixel,
+                 frag_prim, result=None, triangles: int | None = None):
+        """``frag_pixel`` and ``frag_prim``: arrays, or callables making them when first needed (the analytic
+        level never needs the pixels)."""
         self.plan, self.bases, self.result = plan, bases, result
-        self.triangles = int(frag_prim.max()) + 1 if triangles is None and len(frag_prim) else (triangles or 0)
         self.width, self.height = width, height
-        self.frag_pixel = np.asarray(frag_pixel, np.int64)
-        self.frag_prim = np.asarray(frag_prim, np.int64)
+        self._made = {"frag_pixel": frag_pixel, "frag_prim": frag_prim}
+        if triangles is None:
+            prim = self.frag_prim
+            triangles = int(prim.max()) + 1 if len(prim) else 0
+        self.triangles = triangles
+
+    def _array(self, name: str) -> np.ndarray:
+        got = self._made[name]
+        if callable(got):
+            got = got()
+        got = self._made[name] = np.asarray(got, np.int64)
+        return got
+
+    @property
+    def frag_pixel(self) -> np.ndarray:
+        return self._array("frag_pixel")
+
+    @property
+    def frag_prim(self) -> np.ndarray:
+        return self._array("frag_prim")
 
     @classmethod
     def of(cls, result, trace) -> "Workload":
-        order = result.submission if result.submission is not None else np.arange(len(trace))
-        return cls(result.plan, result.bases(), trace.width, trace.height, trace.pixel_ids()[order],
-                   trace.prim[order], result, int(trace.prim.max()) + 1 if len(trace) else 0)
+        order = result.submission
+
+        def pick(values):
+            return lambda: values() if order is None else values()[order]
+
+        return cls(result.plan, result.bases(), trace.width, trace.height, pick(trace.pixel_ids),
+                   pick(lambda: trace.prim), result, int(trace.prim.max()) + 1 if len(trace) else 0)
 
     @property
     def operations(self) -> int:
