@@ -33,7 +33,7 @@ import numpy as np
 from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, split_by, thread_mapping
 from gpusim.hw.machine import flush_cycles
 from gpusim.hw.memory import SECTOR
-from gpusim.hw.units import address_ids
+from gpusim.hw.units import address_ids, run_starts
 from gpusim.schemes.opstream import OPS, _Range
 
 
@@ -77,7 +77,7 @@ def _expand_pass(g, n):
     key = p * n + i
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
         key = np.sort(key)
-    new = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else np.zeros(0, np.int64)
+    new = run_starts(key)
     return key[new] // n, key[new] % n, np.diff(np.append(new, len(key)))
 
 

@@ -30,7 +30,7 @@ from functools import cached_property
 import numpy as np
 
 from gpusim.errors import GpusimError
-from gpusim.hw.units import div, mod
+from gpusim.hw.units import div, mod, run_starts
 from gpusim.schemes.opstream import DEFAULT_MAX_OPS, OPS, OpPlan, _Range
 
 MEM, ATOMIC, ROP, SCOREBOARD = 0, 1, 2, 3
@@ -285,8 +285,7 @@ def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     for p, sel in split_by(pass_of):
         ii = i[sel]
         # iteration inside this pass: position among the thread's operations of the group in the pass
-        first = np.r_[True, ii[1:] != ii[:-1]] if len(ii) else np.zeros(0, bool)
-        starts = np.flatnonzero(first)
+        starts = run_starts(ii)
         k = np.arange(len(ii), dtype=np.int64) - np.repeat(starts, np.diff(np.append(starts, len(ii))))
         pieces.append(_Piece(gi, int(p), threads[ii], k if k.any() else None, addr[sel],
                              nbytes if np.isscalar(nbytes) else nbytes[sel]))
@@ -370,7 +369,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             prim = work.frag_prim[fr]
             order = np.argsort(prim, kind="stable")
             sp = prim[order]
-            start = np.flatnonzero(np.r_[True, sp[1:] != sp[:-1]])
+            start = run_starts(sp)
             rank = np.empty(len(fr), np.int64)
             rank[order] = np.arange(len(fr)) - np.repeat(start, np.diff(np.append(start, len(fr))))
             j_of = np.zeros(len(work.frag_prim), np.int64)
@@ -456,7 +455,7 @@ def _place(pc: _Piece, key, key_lo: int, rank_of, warp_of_lane, lane_in_warp, j_
         order = np.argsort((hi << lane_bits) | mod(r, ws) if plain else full, kind="stable")
         hi, w = hi[order], w[order]
         j = None if j is None else j[order]
-    return order, hi, w, j, np.flatnonzero(np.r_[True, hi[1:] != hi[:-1]])
+    return order, hi, w, j, run_starts(hi)
 
 
 def _raster_positions(work: Workload, pk, lane_keys: np.ndarray) -> tuple[int, np.ndarray]:

@@ -24,7 +24,7 @@ import numpy as np
 
 from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
 from gpusim.schemes.opstream import OPS
-from gpusim.hw.units import FP, Unit, cycles, div, fp_cost, fp_costs, mod
+from gpusim.hw.units import FP, Unit, cycles, div, fp_cost, fp_costs, mod, run_starts
 
 SECTOR = 32     # bytes
 
@@ -98,6 +98,7 @@ class Partitions:
         self.dram_lat = gpu.dram.latency
         # rmw instructions: the sub-cycle each partition started serving them (None without unsynchronised RMW)
         self.rmw_starts: dict[int, list] | None = None
+        self.rmw_merged: list = []          # (instructions, starts) served in other processes (gpusim.hw.parallel)
         self.prog = program
         # access(wi, t): serve instruction wi issued at cycle t; the cycle its last request is back at the core
         self.access = self._l2_path
@@ -156,7 +157,7 @@ class Partitions:
         req_wi = wis[req_rank]
         req_part = part_of(req_seg)
         req_addr = req_seg * m.segment_bytes
-        bounds = np.append(np.flatnonzero(np.r_[True, req_wi[1:] != req_wi[:-1]]), len(req_wi)).tolist()
+        bounds = np.append(run_starts(req_wi), len(req_wi)).tolist()
         lines = div(req_addr, self.l2.line)
         for j in range(len(bounds) - 1):
             a, b = bounds[j], bounds[j + 1]
@@ -194,7 +195,7 @@ class Partitions:
                 key = key[order]
                 if not np.isscalar(nb):
                     nb = nb[order]
-            starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+            starts = run_starts(key)
             touched = (np.add.reduceat(nb, starts) if not np.isscalar(nb)
                        else np.diff(np.append(starts, len(key))) * nb)
             req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(S, SECTOR))
@@ -220,15 +221,21 @@ class Partitions:
         prog = self.prog
         R = prog.rows_of(MEM)
         out = np.full(len(R), -1, np.int64)
-        if self.rmw_starts:
-            wis = np.fromiter(self.rmw_starts, np.int64, len(self.rmw_starts))
-            starts = np.array(list(self.rmw_starts.values()), np.int64)
+        wis, starts = self.rmw_start_arrays()
+        if len(wis):
             lo, counts = prog.row_lo[wis], prog.row_hi[wis] - prog.row_lo[wis]
             k = np.repeat(np.arange(len(wis)), counts)
             rows = np.arange(len(k)) - np.repeat(np.cumsum(counts) - counts, counts) + lo[k]
             part = mod(div(R.address[rows], self.gpu.memory.interleave_bytes), self.gpu.memory.partitions)
             out[rows] = -(-starts[k, part] // FP)
         return out
+
+    def rmw_start_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The RMW instructions served so far and, per partition, the sub-cycle each started serving them."""
+        P = self.gpu.memory.partitions
+        got = [(np.fromiter(self.rmw_starts, np.int64, len(self.rmw_starts)),
+                np.array(list(self.rmw_starts.values()), np.int64).reshape(-1, P))] + self.rmw_merged
+        return np.concatenate([w for w, _ in got]), np.concatenate([a for _, a in got])
 
     def _dram_access(self, lo: list, hi: list, kp: list, kc: list, rmw_wis: set):
         """``access`` without an L2: instruction ``wi``'s cells ``lo[wi]:hi[wi]`` (partition ``kp``, sub-cycles

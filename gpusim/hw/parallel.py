@@ -75,7 +75,8 @@ def plan_shares(machine) -> list[list[int]]:
 def _child(machine, share: list[int], conn) -> None:
     try:
         timeline = machine.run_share(share)
-        rmw = machine.partitions.rmw_starts if machine.partitions is not None else None
+        parts = machine.partitions
+        rmw = parts.rmw_start_arrays() if parts is not None and parts.rmw_starts is not None else None
         conn.send(("ok", timeline, machine.counters(), rmw))
     except BaseException as e:             # reported to the parent, which reruns serially
         conn.send(("failed", f"{type(e).__name__}: {e}", None, None))
@@ -123,12 +124,9 @@ def _merge(machine, shares, got) -> None:
         machine.merge_counters(counters)
     parts = machine.partitions
     if parts is not None and parts.rmw_starts is not None:
-        shift = ((start[:-1] - np.asarray(local_start, np.int64)) * FP).tolist()     # sub-cycles, per pass
-        wi_pass = machine.prog.wi_pass
-        for _, _, _, rmw in got:
-            for wi, starts in rmw.items():
-                d = shift[wi_pass[wi]]
-                parts.rmw_starts[wi] = [x + d for x in starts]     # untouched partitions are never read
+        shift = (start[:-1] - np.asarray(local_start, np.int64)) * FP          # sub-cycles, per pass
+        for _, _, _, (wis, starts) in got:      # (untouched partitions' entries shift too; they are never read)
+            parts.rmw_merged.append((wis, starts + shift[machine.prog.wi_pass[wis]][:, None]))
     machine.pass_cycles = cycles
     machine.now = int(start[-1])
     machine.finished = True

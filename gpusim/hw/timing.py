@@ -4,8 +4,10 @@
 * ``sampled``: the event model on the operations of a random sample of
   non-empty screen tiles (``sample.tile``, ``sample.fraction``, ``sample.seed``)
   and of the same share of threads without a pixel (clear passes), on a
-  machine whose rasterizer is sped up by the same share; each pass's cycles
-  are scaled by its operations in all / in the sample.
+  machine whose rasterizer is sped up by the same share, and again on a
+  random half of that sample; each pass's cycles are extrapolated along the
+  line through the two (a fixed latency part plus a part that grows with the
+  work) to all of its operations.
 * ``analytic``: per pass, the largest of the units' work / throughput bounds
   (issue ports, DRAM channels, atomic units and their hottest address, ROPs)
   and the warps' latency-chain bound, plus one round trip; no events.
@@ -81,12 +83,14 @@ def run_full(work: Workload, gpu, result=None, reference=None, program: Program 
     return _finish(rec, gpu, total), image
 
 
-def tile_sample(work: Workload, gpu):
+def tile_sample(work: Workload, gpu, halve: bool = False):
     """The threads the tile sample keeps: ``keep(pass_index, threads) -> mask``, and what was sampled.
 
     Fragment threads are kept by the screen tile of their pixel, pixel threads
     by their own tile, and other threads (memory entries) by a hash of their
-    warp-sized block, each at ``sample.fraction``.
+    warp-sized block, each at ``sample.fraction``. ``halve``: half of that
+    sample (a random half of its tiles, or half the threads of a single tile;
+    half of its hash range), nested in it.
     """
     c, plan = gpu.sample, work.plan
     tiles_x = -(-work.width // c.tile)
@@ -102,37 +106,74 @@ def tile_sample(work: Workload, gpu):
     tiles = np.flatnonzero(present)
     rng = np.random.default_rng(c.seed)
     k = max(1, int(round(c.fraction * len(tiles)))) if len(tiles) else 0
+    picked = rng.choice(tiles, size=k, replace=False) if k else tiles      # in random order
+    split_tiles = halve and len(picked) > 1
+    if split_tiles:
+        picked = picked[:len(picked) // 2]
     chosen = np.zeros(len(present), bool)
-    chosen[rng.choice(tiles, size=k, replace=False) if k else tiles] = True
-    threshold = int(c.fraction * 2**32)
+    chosen[picked] = True
+    threshold = int(c.fraction * 2**32) // (2 if halve else 1)
+
+    def hashed(values, below):
+        return ((values * 2654435761 + c.seed * 97) & 0xFFFFFFFF) < below
 
     def keep(p: int, threads: np.ndarray) -> np.ndarray:
         kind = plan.passes[p].threads
-        if kind == "fragment":
-            return chosen[tile_of(work.frag_pixel[threads])]
-        if kind == "pixel":
-            return chosen[tile_of(threads)]
-        block = threads // gpu.core.warp_size
-        return ((block * 2654435761 + c.seed * 97) & 0xFFFFFFFF) < threshold
+        if kind in ("fragment", "pixel"):
+            mask = chosen[tile_of(work.frag_pixel[threads] if kind == "fragment" else threads)]
+            if halve and not split_tiles:          # a single tile: half of its threads
+                mask &= hashed(threads, 1 << 31)
+            return mask
+        return hashed(threads // gpu.core.warp_size, threshold)
 
-    return keep, {"tiles": int(len(tiles)), "tiles_sampled": int(k), "tile": c.tile, "seed": c.seed,
+    return keep, {"tiles": int(len(tiles)), "tiles_sampled": int(len(picked)), "tile": c.tile, "seed": c.seed,
                   "fraction": c.fraction}
+
+
+def _sample_run(work: Workload, gpu, keep):
+    """The event model on the threads ``keep`` keeps, on a machine whose rasterizer gets their share (so a
+    raster-bound pass scales with the sample too); (record, program)."""
+    program = lower(work, gpu, keep)
+    kept, total = sum(p.operations for p in program.passes), sum(p.operations_total for p in program.passes)
+    share = max(1, kept) / max(1, total)
+    sample_gpu = replace(gpu, raster=replace(gpu.raster, triangles_per_cycle=gpu.raster.triangles_per_cycle / share))
+    rec, _ = run_full(work, sample_gpu, program=program)
+    return rec, program
+
+
+def extrapolate(t1: float, s1: float, t2: float, s2: float, one_round: bool) -> float:
+    """A pass's cycles on all its operations from two nested samples: ``t1`` cycles on share ``s1`` of them,
+    ``t2`` on ``s2 < s1``. A pass takes a fixed part (its slowest thread's latency chain, the pipeline) plus
+    a part that grows with the work, so the line through the two samples is followed to share 1. A share
+    of 1 is the whole pass (exact). When both samples hold the same operations (a small pass), there is no
+    line: a pass of at most a warp per SM (``one_round``) keeps the sample's time (its slowest warp's), a
+    larger one scales it with the work."""
+    if s1 >= 1.0:
+        return t1
+    if s2 >= 1.0:
+        return t2
+    if s2 <= 0.0 or s1 - s2 < 1e-9:
+        return t1 if one_round else t1 / s1
+    slope = max(0.0, (t1 - t2) / (s1 - s2))
+    return t1 + (1.0 - s1) * slope
 
 
 def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict, None]:
     start = time.perf_counter()
     keep, info = tile_sample(work, gpu)
-    program = lower(work, gpu, keep)
-    kept, total = sum(p.operations for p in program.passes), sum(p.operations_total for p in program.passes)
-    # the sample gets its share of the rasterizer, so a raster-bound pass scales back to the whole
-    share = max(1, kept) / max(1, total)
-    sample_gpu = replace(gpu, raster=replace(gpu.raster, triangles_per_cycle=gpu.raster.triangles_per_cycle / share))
-    rec, _ = run_full(work, sample_gpu, program=program)
-    for p, pp in zip(rec["passes"], program.passes):     # both in pass order
+    rec, program = _sample_run(work, gpu, keep)
+    rec2, program2 = _sample_run(work, gpu, tile_sample(work, gpu, halve=True)[0])
+    resident = gpu.core.sms * gpu.core.warp_size         # lanes of a warp per SM
+    for p, pp, p2, pp2 in zip(rec["passes"], program.passes, rec2["passes"], program2.passes):   # pass order
+        total = pp.operations_total
+        s1 = pp.operations / total if pp.operations else 1.0        # a pass with none kept ran whole
+        s2 = pp2.operations / total if pp2.operations else 1.0
         p["sampled_cycles"] = p["cycles"]
-        p["cycles"] = int(round(p["cycles"] * (pp.operations_total / pp.operations if pp.operations else 1.0)))
+        p["cycles"] = int(round(extrapolate(p["cycles"], s1, p2["cycles"], s2, pp.lanes / s1 <= resident)))
+    kept, total = sum(p.operations for p in program.passes), sum(p.operations_total for p in program.passes)
     rec["fidelity"] = "sampled"
-    rec["sample"] = info | {"operations_sampled": int(kept)}
+    rec["sample"] = info | {"operations_sampled": int(kept),
+                            "operations_half_sample": int(sum(p.operations for p in program2.passes))}
     rec["operations"] = int(total)
     ops_scale = total / max(1, kept)
     rec["rmw_hazards"] = int(round(rec.get("rmw_hazards", 0) * ops_scale))
