@@ -163,3 +163,15 @@ def test_presets_load_and_unknown_preset_lists_valid():
     assert load_gpu("gtx280").core.sms == 30 and load_gpu("gtx280").memory.partitions == 8
     with pytest.raises(ConfigError, match="valid: geforce7900gtx, gtx280, modern"):
         load_gpu("gtx9999")
+
+
+def test_l2_slice_is_lru_and_write_back():
+    from gpusim.hw.memory import L2Slices
+    gpu = load_gpu("modern", ["l2.size_bytes=256", "l2.line_bytes=128", "l2.ways=2"])     # one set of 2 ways
+    l2 = L2Slices(gpu)
+    a, b, c = 0, 1, 2                                  # lines of partition 0, all in its only set
+    got = [l2.lookup(0, a, True), l2.lookup(0, b, False), l2.lookup(0, a, False), l2.lookup(0, c, False),
+           l2.lookup(0, b, False), l2.lookup(0, a, False)]
+    # a (dirty) and b miss; a hits; c evicts b (least recent, clean); b evicts a (dirty: written back)
+    assert got == [(False, False), (False, False), (True, False), (False, False), (False, True), (False, False)]
+    assert (l2.hits[0], l2.misses[0]) == (1, 5)

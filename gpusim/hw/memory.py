@@ -24,7 +24,7 @@ import numpy as np
 
 from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
 from gpusim.schemes.opstream import OPS
-from gpusim.hw.units import FP, Unit, cycles, div, fp_cost, fp_costs, mod, run_starts
+from gpusim.hw.units import FP, Unit, div, fp_costs, mod, run_starts
 
 SECTOR = 32     # bytes
 
@@ -34,7 +34,12 @@ class DramChannels(Unit):
 
 
 class L2Slices(Unit):
-    """Tag store of all slices: ``sets`` sets of ``ways`` lines per slice."""
+    """Tag store of all slices: ``sets`` sets of ``ways`` lines per slice, LRU, write-back.
+
+    A set is a dict from tag to dirty flag in recency order (least recent
+    first), made when first touched: requests are looked up one at a time in
+    the order the instruction makes them.
+    """
 
     name = "l2"
 
@@ -42,32 +47,29 @@ class L2Slices(Unit):
         super().__init__(gpu.memory.partitions)
         c = gpu.l2
         self.line = c.line_bytes
+        self.ways = c.ways
         self.sets = c.size_bytes // (c.line_bytes * c.ways)
-        self.tags = np.full((self.instances * self.sets, c.ways), -1, np.int64)
-        self.stamp = np.zeros((self.instances * self.sets, c.ways), np.int64)
-        self.dirty = np.zeros((self.instances * self.sets, c.ways), bool)
-        self.clock = 0
+        self.tags: dict[int, dict] = {}          # set (partition * sets + index) -> {tag: dirty}
         self.hits = [0] * self.instances
         self.misses = [0] * self.instances
 
-    def lookup(self, part: np.ndarray, line: np.ndarray, write: bool) -> tuple[np.ndarray, np.ndarray]:
-        """Hit flags and dirty-eviction flags of requests (one instruction's lines, distinct)."""
-        s = part * self.sets + line % self.sets
+    def lookup(self, p: int, line: int, write: bool) -> tuple[bool, bool]:
+        """(hit, a dirty line was evicted) for one request; the line becomes the set's most recent."""
+        s = p * self.sets + line % self.sets
         tag = line // self.sets
-        match = self.tags[s] == tag[:, None]
-        hit = match.any(axis=1)
-        way = np.where(hit, match.argmax(axis=1), self.stamp[s].argmin(axis=1))
-        evict_dirty = ~hit & self.dirty[s, way] & (self.tags[s, way] >= 0)
-        self.clock += 1
-        self.tags[s, way] = tag
-        self.stamp[s, way] = self.clock
-        self.dirty[s, way] = np.where(hit, self.dirty[s, way] | write, write)
-        for p, h in zip(part.tolist(), hit.tolist()):
-            if h:
-                self.hits[p] += 1
-            else:
-                self.misses[p] += 1
-        return hit, evict_dirty
+        d = self.tags.get(s)
+        if d is None:
+            d = self.tags[s] = {}
+        if tag in d:
+            d[tag] = d.pop(tag) or write
+            self.hits[p] += 1
+            return True, False
+        self.misses[p] += 1
+        evict = False
+        if len(d) >= self.ways:
+            evict = d.pop(next(iter(d)))
+        d[tag] = write
+        return False, evict
 
     def stats(self, total_cycles):
         from gpusim.hw.units import UnitStat
@@ -155,14 +157,16 @@ class Partitions:
             return
         req_rank, req_seg, req_bytes = (np.concatenate(c) for c in zip(*chunks))
         req_wi = wis[req_rank]
-        req_part = part_of(req_seg)
-        req_addr = req_seg * m.segment_bytes
         bounds = np.append(run_starts(req_wi), len(req_wi)).tolist()
-        lines = div(req_addr, self.l2.line)
-        for j in range(len(bounds) - 1):
-            a, b = bounds[j], bounds[j + 1]
-            wi = int(req_wi[a])
-            self.table[wi] = ((req_part[a:b], lines[a:b], req_bytes[a:b]), bool(write[wi]), bool(rmw[wi]))
+        # per request: partition, line, L2 sub-cycles, DRAM sub-cycles on a miss, and with a dirty eviction
+        reqs = list(zip(part_of(req_seg).tolist(), div(req_seg * m.segment_bytes, self.l2.line).tolist(),
+                        fp_costs(req_bytes, gpu.l2.bytes_per_cycle).tolist(),
+                        fp_costs(req_bytes, gpu.dram.bytes_per_cycle).tolist(),
+                        fp_costs(req_bytes + self.l2.line, gpu.dram.bytes_per_cycle).tolist()))
+        first_wi = req_wi[bounds[:-1]].tolist()
+        w_, r_ = write.tolist(), rmw.tolist()
+        for wi, a, b in zip(first_wi, bounds[:-1], bounds[1:]):
+            self.table[wi] = (reqs[a:b], w_[wi], r_[wi])
 
     @staticmethod
     def _requests(part, off: int, los: np.ndarray, counts: np.ndarray, m, chunk: int = 1 << 20):
@@ -205,12 +209,39 @@ class Partitions:
         return out
 
     def _l2_path(self, wi: int, t: int) -> int:
-        """``access`` with an L2."""
-        entry, write, rmw = self.table[wi]
-        starts: dict = {}
-        done = self._l2_access(entry, write, (t + self.icn) * FP, starts)
+        """``access`` with an L2: each request through its slice (hit at ``l2.bytes_per_cycle`` and
+        ``l2.latency``), a miss or a dirty eviction on to the DRAM channel behind it."""
+        reqs, write, rmw = self.table[wi]
+        arrive = (t + self.icn) * FP
+        l2, l2_free, dram_free = self.l2, self.l2_free, self.dram_free
+        l2_busy, l2_req, d_busy, d_req = l2.busy_fp, l2.requests, self.dram.busy_fp, self.dram.requests
+        l2_lat, miss_lat = self.gpu.l2.latency, self.gpu.dram.latency + self.gpu.l2.latency
+        starts = [-1] * len(dram_free) if rmw else None     # first start per partition
+        done = 0
+        for p, line, cost, dmiss, devict in reqs:
+            start = l2_free[p]
+            if start < arrive:
+                start = arrive
+            if rmw and starts[p] < 0:
+                starts[p] = start
+            end = start + cost
+            l2_free[p] = end
+            l2_busy[p] += cost
+            l2_req[p] += 1
+            hit, evict = l2.lookup(p, line, write)
+            if hit:
+                finish = -(-end // FP) + l2_lat
+            else:
+                dstart = dram_free[p] if dram_free[p] > end else end
+                dcost = devict if evict else dmiss
+                dram_free[p] = dstart + dcost
+                d_busy[p] += dcost
+                d_req[p] += 1
+                finish = -(-(dstart + dcost) // FP) + miss_lat
+            if finish > done:
+                done = finish
         if rmw:
-            self.rmw_starts[wi] = [starts.get(p, 0) for p in range(len(self.dram_free))]
+            self.rmw_starts[wi] = starts
         return done + self.icn
 
     def sample(self) -> np.ndarray | None:
@@ -272,31 +303,6 @@ class Partitions:
             return access(wi, t)
 
         return access_rmw
-
-    def _l2_access(self, entry, write, arrive, starts) -> int:
-        parts, lines, nbytes = entry
-        hit, evict = self.l2.lookup(parts, lines, write)
-        c, d = self.gpu.l2, self.gpu.dram
-        done = 0
-        for p, h, e, nb in zip(parts.tolist(), hit.tolist(), evict.tolist(), nbytes.tolist()):
-            start = max(arrive, self.l2_free[p])
-            cost = fp_cost(nb, c.bytes_per_cycle)
-            self.l2_free[p] = start + cost
-            self.l2.busy_fp[p] += cost
-            self.l2.requests[p] += 1
-            starts.setdefault(p, start)
-            finish = cycles(start + cost) + c.latency
-            if not h or e:
-                moved = (0 if h else nb) + (self.l2.line if e else 0)
-                dstart = max(start + cost, self.dram_free[p])
-                dcost = fp_cost(moved, d.bytes_per_cycle)
-                self.dram_free[p] = dstart + dcost
-                self.dram.busy_fp[p] += dcost
-                self.dram.requests[p] += 1
-                if not h:
-                    finish = cycles(dstart + dcost) + d.latency + c.latency
-            done = max(done, finish)
-        return done
 
     def idle_at(self) -> int:
         """The cycle every channel and slice is free again."""
