@@ -5,7 +5,8 @@ is a function ``(result, trace, gpu, reference) -> (record, image or None)``:
 
 * ``analytic``: per-pass bounds from work / throughput and latency chains
   (gpusim.hw.timing);
-* ``sampled``: the event model on a sample of screen tiles, scaled up;
+* ``sampled``: the event model on a sample of screen tiles and on half of it,
+  each pass extrapolated along the line through the two;
 * ``full``: the discrete-event model of the GPU (gpusim.hw.machine) on every
   operation, with RMW hazards replayed into the image;
 * ``thesis``: the execution-time model of seed 003 section 4.3.2 (one cycle per
