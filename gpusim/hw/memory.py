@@ -123,7 +123,11 @@ class Partitions:
         rmw = rmw_op[prog.wi_op]
         if rmw.any():
             self.rmw_starts = {}
-        chunks = [q for part, off in zip(R.parts, R.offsets()) for q in self._requests(part, off, los, counts, m)]
+        # part by part (arrays the allocator reuses), or all rows at once when there are many small parts
+        # (a k-buffer batch run: thousands), where numpy's per-call cost would dominate
+        parts = (zip(R.parts, R.offsets()) if len(R.parts) <= 64
+                 else [((None, R.address, R.nbytes, None), 0)])
+        chunks = [q for part, off in parts for q in self._requests(part, off, los, counts, m)]
         self.bytes_written = sum(int(nb[write[wis[rank]]].sum()) for rank, _, nb in chunks)
         self.bytes_read = sum(int(nb.sum()) for _, _, nb in chunks) - self.bytes_written
 
@@ -294,13 +298,23 @@ class Partitions:
         rmw_starts = self.rmw_starts
 
         def access_rmw(wi: int, t: int) -> int:
-            if wi in rmw_wis:
-                arrive = (t + icn) * FP
-                starts = [0] * len(free)
-                for j in range(lo[wi], hi[wi]):
-                    starts[kp[j]] = max(arrive, free[kp[j]])
-                rmw_starts[wi] = starts
-            return access(wi, t)
+            if wi not in rmw_wis:
+                return access(wi, t)
+            arrive = (t + icn) * FP
+            end = 0
+            starts = [-1] * len(free)          # an instruction has one cell per partition it reaches
+            for j in range(lo[wi], hi[wi]):
+                p = kp[j]
+                e = free[p]
+                if e < arrive:
+                    e = arrive
+                starts[p] = e
+                e += kc[j]
+                free[p] = e
+                if e > end:
+                    end = e
+            rmw_starts[wi] = starts
+            return -(-end // FP) + tail
 
         return access_rmw
 
