@@ -121,15 +121,19 @@ def test_rasterizer_takes_the_triangles_a_pass_submits():
     # two fragments of triangles 500 and 501 of a 1,000-triangle scene, 1 triangle/cycle: a pass submitting the
     # whole scene lasts the 1,000 cycles of rasterizing it; a batch of the two triangles only waits for them
     # (ready at cycle 2, one 32-byte request: 1 cycle, + 100 latency)
-    def run(primitives):
+    def run(primitives, prims=(500, 501)):
+        n = len(prims)
         plan = OpPlan([Pass("draw", "geometry", "fragment", primitives=primitives)], ["a"])
-        plan.add(0, "store", "a", 2, 1, lambda i, s: i * 4, 4)
+        plan.add(0, "store", "a", n, 1, lambda i, s: i * 4, 4)
         gpu = load_gpu("gtx280", SIMPLE + ["raster.triangles_per_cycle=1.0"])
-        work = Workload(plan, layout_bases(plan.structures, {"a": 8}), 64, 64, np.zeros(2, np.int64),
-                        np.array([500, 501]), triangles=1000)
+        work = Workload(plan, layout_bases(plan.structures, {"a": 4 * n}), 64, 64, np.zeros(n, np.int64),
+                        np.array(prims), triangles=1000)
         return Machine(gpu, lower(work, gpu), 64).run()
     assert run(None) == 1000
     assert run(2) == 2 + 1 + 100
+    # a batch whose fragments come back to a triangle: two distinct triangles spread over its three,
+    # the last one out at 3 (not past the batch's end)
+    assert run(3, (500, 501, 500)) == 3 + 1 + 100
 
 
 def test_scoreboard_serializes_a_pixel():

@@ -30,10 +30,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.hw.lower import ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, split_by, thread_mapping
+from gpusim.hw.lower import (ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, split_by, submitted_triangles,
+                             thread_mapping)
 from gpusim.hw.machine import flush_cycles
 from gpusim.hw.memory import SECTOR
-from gpusim.hw.units import address_ids, run_starts
+from gpusim.hw.units import address_ids
+from gpusim.metrics.composite import run_starts
 from gpusim.schemes.opstream import OPS, _Range
 
 
@@ -209,8 +211,7 @@ def analytic_timing(result, work, gpu) -> dict:
         }
         mapping = thread_mapping(gpu, pk)
         if mapping == "fragment":          # the fixed-function rasterizer sees every triangle
-            tris = pk.primitives if pk.primitives is not None else work.triangles
-            bounds["raster"] = tris / gpu.raster.triangles_per_cycle
+            bounds["raster"] = submitted_triangles(pk, work) / gpu.raster.triangles_per_cycle
         elif mapping == "triangle":        # software setup on the SMs
             bounds["issue"] += np.ceil(n_warps / min(c.sms, n_warps)) * gpu.raster.setup_instructions * c.issue_cycles
         limit = max(bounds, key=bounds.get)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.hw.lower import ATOMIC, Program
-from gpusim.hw.units import FP, Unit, UnitStat, address_ids, div, fp_costs, mod
+from gpusim.hw.units import FP, Unit, UnitStat, address_ids, cycles, div, fp_costs, mod
 
 
 class AtomicUnits(Unit):
@@ -81,7 +81,7 @@ class AtomicUnits(Unit):
 
     def idle_at(self) -> int:
         """The cycle every unit and address is free again."""
-        return max(self.until, -(-max(self.free) // FP))
+        return max(self.until, cycles(max(self.free)))
 
     def stats(self, total_cycles):
         rows = super().stats(total_cycles)

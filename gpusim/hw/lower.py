@@ -30,7 +30,9 @@ from functools import cached_property
 import numpy as np
 
 from gpusim.errors import GpusimError
-from gpusim.hw.units import div, mod, run_starts
+from gpusim.hw.units import div, mod
+from gpusim.metrics.composite import run_starts
+from gpusim.schemes.arrays import rank_in_runs
 from gpusim.schemes.opstream import DEFAULT_MAX_OPS, OPS, OpPlan, _Range
 
 MEM, ATOMIC, ROP, SCOREBOARD = 0, 1, 2, 3
@@ -118,6 +120,10 @@ class PassProgram:
     def warps(self) -> int:
         return len(self.wi_start) - 1
 
+    @property
+    def instructions(self) -> int:
+        return int(self.wi_start[-1] - self.wi_start[0]) if self.warps else 0
+
 
 class Rows:
     """The operations of one unit class, instruction by instruction (each instruction's lanes in lane order).
@@ -187,7 +193,6 @@ class Program:
     wi_k: np.ndarray               # its iteration inside the group's loop
     row_sets: dict[int, Rows]      # unit class -> its rows
     frag_pixel: np.ndarray = field(repr=False, default=None)   # pixel of each fragment thread
-    triangles: int = 0             # triangles of the scene (the rasterizer's work per geometry pass)
 
     @property
     def instructions(self) -> int:
@@ -285,8 +290,7 @@ def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     for p, sel in split_by(pass_of):
         ii = i[sel]
         # iteration inside this pass: position among the thread's operations of the group in the pass
-        starts = run_starts(ii)
-        k = np.arange(len(ii), dtype=np.int64) - np.repeat(starts, np.diff(np.append(starts, len(ii))))
+        k = rank_in_runs(ii)
         pieces.append(_Piece(gi, int(p), threads[ii], k if k.any() else None, addr[sel],
                              nbytes if np.isscalar(nbytes) else nbytes[sel]))
     return pieces
@@ -369,9 +373,8 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             prim = work.frag_prim[fr]
             order = np.argsort(prim, kind="stable")
             sp = prim[order]
-            start = run_starts(sp)
             rank = np.empty(len(fr), np.int64)
-            rank[order] = np.arange(len(fr)) - np.repeat(start, np.diff(np.append(start, len(fr))))
+            rank[order] = rank_in_runs(sp)
             j_of = np.zeros(len(work.frag_prim), np.int64)
             j_of[fr] = rank
         lane_bits = _bits(ws)
@@ -421,7 +424,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
     wi_op = np.array([OPS.index(gr.op) for gr in plan.groups], np.int64)[g] if len(g) else g
     wi_dep = np.array([gr.dep for gr in plan.groups], bool)[g] if len(g) else np.zeros(0, bool)
     return Program(passes, lo, hi, wi_op, OP_CLASS[wi_op], wi_dep, OP_PRODUCES[wi_op], w, pa, g, k,
-                   row_sets, work.frag_pixel, work.triangles)
+                   row_sets, work.frag_pixel)
 
 
 def _place(pc: _Piece, key, key_lo: int, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps: int, ws: int,
@@ -469,15 +472,20 @@ def _raster_positions(work: Workload, pk, lane_keys: np.ndarray) -> tuple[int, n
     order of its first fragment, spread over the pass's triangles.
     """
     prim = work.frag_prim[lane_keys]
+    total = submitted_triangles(pk, work)
     if pk.primitives is None and (len(prim) < 2 or bool((prim[1:] >= prim[:-1]).all())):
-        return work.triangles, prim + 1
-    total = pk.primitives if pk.primitives is not None else work.triangles
+        return total, prim + 1
     _, first, inverse = np.unique(prim, return_index=True, return_inverse=True)
     rank = np.empty(len(first), np.int64)
     rank[np.argsort(first)] = np.arange(1, len(first) + 1)
-    seq = rank[inverse]
-    distinct = int(seq[-1]) if len(seq) else 1
-    return total, -(-seq * max(total, distinct) // distinct)
+    distinct = max(1, len(first))
+    return total, -(-rank[inverse] * max(total, distinct) // distinct)
+
+
+def submitted_triangles(pk, work: Workload) -> int:
+    """Triangles a geometry pass submits to the rasterizer: the whole scene unless the scheme's pass says
+    fewer (``Pass.primitives``, a k-buffer batch)."""
+    return pk.primitives if pk.primitives is not None else work.triangles
 
 
 def _scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:

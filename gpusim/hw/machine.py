@@ -41,6 +41,7 @@ from __future__ import annotations
 import gc
 import math
 from collections import deque
+from functools import cached_property
 from heapq import heappop, heappush
 from itertools import count
 
@@ -50,6 +51,7 @@ from gpusim.errors import GpusimError
 from gpusim.hw.atomic import AtomicUnits
 from gpusim.hw.lower import ATOMIC, MEM, ROP, SCOREBOARD, Program
 from gpusim.hw.memory import Partitions
+from gpusim.hw.parallel import plan_shares, run_shares
 from gpusim.hw.rop import RopUnits
 from gpusim.hw.scoreboard import Scoreboard
 from gpusim.hw.units import Signal
@@ -90,7 +92,6 @@ class Machine:
         self.waiting: dict[int, tuple] = {}        # warp -> (pass, SM, instruction, unit) it waits on
         self.pass_cycles: list[int] = []
         self.current_pass = 0
-        self._lists = None
         self.finished = False
 
     # ------------------------------------------------------------------ build
@@ -135,7 +136,6 @@ class Machine:
                 gc.enable()
 
     def _run(self) -> int:
-        from gpusim.hw.parallel import plan_shares, run_shares
         shares = plan_shares(self)
         if len(shares) > 1 and run_shares(self, shares):
             return int(self.now)
@@ -222,7 +222,7 @@ class Machine:
     def _loop(self, p, wi_start, ready) -> int:
         """Process the queue until the pass's warps are done; the cycle its last operation completes."""
         queue, order = self._queue, self._order
-        cls_of, dep_of, prod_of = self._instruction_lists()
+        cls_of, dep_of, prod_of = self._instruction_lists
         sm_free, cost, setup = self.sm_free, self.issue_cost, p.setup_cycles
         mem = self.partitions.access if self.partitions is not None else None
         atom = self.atomics.access if self.atomics is not None else None
@@ -307,13 +307,12 @@ class Machine:
             raise NoProgress(self.diagnosis(limit))
         return done_all
 
+    @cached_property
     def _instruction_lists(self) -> tuple[list, list, list]:
         """Each instruction's unit class, whether it waits for a result, whether it produces one (as lists,
         made once: the loop indexes them per instruction)."""
-        if self._lists is None:
-            prog = self.prog
-            self._lists = (prog.wi_class.tolist(), prog.wi_dep.tolist(), prog.wi_produces.tolist())
-        return self._lists
+        prog = self.prog
+        return prog.wi_class.tolist(), prog.wi_dep.tolist(), prog.wi_produces.tolist()
 
     def _wait(self, st, signal: Signal, p, wi: int, unit: str) -> None:
         st[PHASE] = ISSUE                      # retry the same instruction when the unit signals

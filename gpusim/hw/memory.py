@@ -24,7 +24,8 @@ import numpy as np
 
 from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
 from gpusim.schemes.opstream import OPS
-from gpusim.hw.units import FP, Unit, div, fp_costs, mod, run_starts
+from gpusim.hw.units import FP, Unit, cycles, div, fp_costs, mod
+from gpusim.metrics.composite import run_starts
 
 SECTOR = 32     # bytes
 
@@ -109,7 +110,6 @@ class Partitions:
     def _build(self, prog: Program) -> None:
         m, gpu = self.gpu.memory, self.gpu
         P = m.partitions
-        self.table: list = [None] * prog.instructions
         wis, counts, _ = prog.storage(MEM)
         if not len(wis):
             return
@@ -169,6 +169,7 @@ class Partitions:
                         fp_costs(req_bytes + self.l2.line, gpu.dram.bytes_per_cycle).tolist()))
         first_wi = req_wi[bounds[:-1]].tolist()
         w_, r_ = write.tolist(), rmw.tolist()
+        self.table: list = [None] * prog.instructions     # instruction -> (requests, write, rmw)
         for wi, a, b in zip(first_wi, bounds[:-1], bounds[1:]):
             self.table[wi] = (reqs[a:b], w_[wi], r_[wi])
 
@@ -262,7 +263,7 @@ class Partitions:
             k = np.repeat(np.arange(len(wis)), counts)
             rows = np.arange(len(k)) - np.repeat(np.cumsum(counts) - counts, counts) + lo[k]
             part = mod(div(R.address[rows], self.gpu.memory.interleave_bytes), self.gpu.memory.partitions)
-            out[rows] = -(-starts[k, part] // FP)
+            out[rows] = cycles(starts[k, part])
         return out
 
     def rmw_start_arrays(self) -> tuple[np.ndarray, np.ndarray]:
@@ -320,7 +321,7 @@ class Partitions:
 
     def idle_at(self) -> int:
         """The cycle every channel and slice is free again."""
-        return -(-max(self.dram_free + self.l2_free) // FP)
+        return cycles(max(self.dram_free + self.l2_free))
 
     def units(self) -> list[Unit]:
         return [u for u in (self.l2, self.dram) if u is not None and sum(u.requests)]

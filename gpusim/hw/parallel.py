@@ -51,7 +51,7 @@ def plan_shares(machine) -> list[list[int]]:
     auto = workers == 0
     if auto:
         workers = available_cpus()
-    weight = [int(p.wi_start[-1] - p.wi_start[0]) if p.warps else 0 for p in prog.passes]
+    weight = [p.instructions for p in prog.passes]
     busy = [i for i, w in enumerate(weight) if w]
     everything = [list(range(len(prog.passes)))]
     if workers < 2 or len(busy) < 2 or machine.partitions is not None and machine.partitions.l2 is not None:

@@ -125,13 +125,3 @@ def address_ids(addr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     uniq, ids = np.unique(addr, return_inverse=True)
     return ids, np.bincount(ids, minlength=len(uniq))
 
-
-def run_starts(a: np.ndarray) -> np.ndarray:
-    """Indices where a run of equal values begins (0 first): ``flatnonzero(r_[True, a[1:] != a[:-1]])``
-    without ``np.r_``'s overhead (lowering calls it once per piece; a batch run has thousands)."""
-    if not len(a):
-        return np.zeros(0, np.int64)
-    change = np.empty(len(a), bool)
-    change[0] = True
-    np.not_equal(a[1:], a[:-1], out=change[1:])
-    return np.flatnonzero(change)
