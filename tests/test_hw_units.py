@@ -154,6 +154,7 @@ def test_scoreboard_serializes_a_pixel():
     ("dram.latency", -5, "dram.latency: must be >= 0"),
     ("core.bogus", 1, "core.bogus: unknown key"),
     ("runner.no_progress_cycles", 10, "must exceed the slowest latency"),
+    ("runner.workers", -1, "runner.workers: must be >= 0 processes"),
 ])
 def test_impossible_gpu_config_fails_at_load(key, value, match):
     with pytest.raises(ConfigError, match=match):
