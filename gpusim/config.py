@@ -196,13 +196,29 @@ def to_dict(obj: Any) -> Any:
     return obj
 
 
+def type_name(hint: Any) -> str:
+    """A parameter type as a user writes it: ``int``, ``float``, ``bool``, ``str``, ``float | None``,
+    ``'peel' | 'sort-blend'``."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is Literal:
+        return " | ".join(repr(a) for a in args)
+    if origin is typing.Union or origin is types.UnionType:
+        return " | ".join(type_name(a) for a in args)
+    if hint is type(None):
+        return "None"
+    if origin is tuple:
+        inner = ", ".join("..." if a is Ellipsis else type_name(a) for a in args)
+        return f"tuple[{inner}]"
+    return getattr(hint, "__name__", str(hint))
+
+
 def describe(cls: type) -> list[dict]:
     """Name, type, default, unit and description of each parameter of ``cls``."""
     hints = typing.get_type_hints(cls)
     rows = []
     for f in dataclasses.fields(cls):
         default = None if f.default is dataclasses.MISSING else f.default
-        rows.append({"name": f.name, "type": str(hints[f.name]).replace("typing.", ""),
+        rows.append({"name": f.name, "type": type_name(hints[f.name]),
                      "default": default, "unit": f.metadata.get("unit", ""),
                      "doc": f.metadata.get("doc", "")})
     return rows

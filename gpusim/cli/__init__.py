@@ -6,11 +6,12 @@ import os
 import sys
 
 from gpusim import __version__
-from gpusim.cli import info_cmd, replay_cmd, schemes_cmd, show_cmd, trace_cmd, vary_cmd
+from gpusim.cli import (config_cmd, info_cmd, replay_cmd, report_cmd, run_cmd, schemes_cmd, show_cmd,
+                        trace_cmd)
 from gpusim.cli.common import Parser
 from gpusim.errors import GpusimError
 
-COMMANDS = (trace_cmd, info_cmd, show_cmd, replay_cmd, schemes_cmd, vary_cmd)
+COMMANDS = (run_cmd, config_cmd, report_cmd, trace_cmd, info_cmd, show_cmd, replay_cmd, schemes_cmd)
 
 
 def build_parser() -> Parser:

@@ -13,11 +13,26 @@ from gpusim.atomic_io import atomic_output
 
 def save_image_png(image: np.ndarray, path: str | os.PathLike) -> None:
     """Write an (H, W, 3) float image in [0, 1], row 0 = bottom, as an 8-bit PNG (atomically)."""
+    from gpusim.experiment.execute import rgb8
+    save_rgb8_png(rgb8(image), path)
+
+
+def save_rgb8_png(rgb: np.ndarray, path: str | os.PathLike) -> None:
+    """Write 8-bit (H, W, 3) rows, top row first, as a PNG (atomically)."""
     from matplotlib import image as mpimg
 
-    rgb = np.clip(np.asarray(image, dtype=np.float64)[::-1], 0.0, 1.0)
     with atomic_output(path) as handle:
-        mpimg.imsave(handle, (rgb * 255.0 + 0.5).astype(np.uint8), format="png")
+        mpimg.imsave(handle, np.ascontiguousarray(rgb, dtype=np.uint8), format="png")
+
+
+def load_rgb8_png(path: str | os.PathLike) -> np.ndarray:
+    """An 8-bit PNG back as (H, W, 3) uint8 rows, top row first."""
+    from matplotlib import image as mpimg
+
+    data = mpimg.imread(path)
+    if data.dtype != np.uint8:
+        data = (data * 255.0 + 0.5).astype(np.uint8)
+    return data[..., :3]
 
 
 def save_heatmap_png(values: np.ndarray, path: str | os.PathLike, title: str, label: str,

@@ -1,0 +1,116 @@
+"""Where a sweep's tasks run: in this process, in local worker processes, or on a dask.distributed cluster.
+
+Each executor takes (task, trace) pairs and yields ``(task, outcomes)`` as
+tasks finish, in completion order. The same :func:`gpusim.experiment.execute.execute`
+runs in all three; the caller writes every file, so workers never need the
+output directory.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import Iterator
+
+from gpusim.errors import GpusimError
+from gpusim.experiment.execute import Outcome, Task, execute
+
+
+def _watch_parent(parent: int) -> None:
+    """In a worker: exit when the sweep's process is gone (killed with SIGKILL), instead of lingering."""
+    def watch():
+        while True:
+            if os.getppid() != parent:
+                os._exit(1)
+            time.sleep(0.5)
+    threading.Thread(target=watch, daemon=True, name="gpusim-parent-watch").start()
+
+
+def _execute_path(task: Task) -> list[Outcome]:
+    return execute(task)
+
+
+class InlineExecutor:
+    """Tasks one after another in this process (``--workers 1``)."""
+
+    def __init__(self, traces: dict[str, object]):
+        self.traces = traces
+
+    def run(self, tasks: list[Task]) -> Iterator[tuple[Task, list[Outcome]]]:
+        for task in tasks:
+            yield task, execute(task, self.traces.get(task.trace_path))
+
+    def close(self) -> None:
+        pass
+
+
+class LocalExecutor:
+    """Tasks in ``workers`` spawned processes; each loads its trace from the file the sweep wrote."""
+
+    def __init__(self, workers: int):
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=_watch_parent, initargs=(os.getpid(),))
+
+    def run(self, tasks: list[Task]) -> Iterator[tuple[Task, list[Outcome]]]:
+        pending = {self.pool.submit(_execute_path, task): task for task in tasks}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                task = pending.pop(future)
+                try:
+                    yield task, future.result()
+                except BrokenProcessPool:
+                    raise GpusimError("a worker process died (killed, perhaps for lack of memory); finished runs "
+                                      "are kept: rerun with fewer --workers, a smaller size or a lower fidelity") \
+                        from None
+
+    def close(self) -> None:
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        for child in multiprocessing.active_children():
+            child.terminate()
+        for child in multiprocessing.active_children():
+            child.join(timeout=5)
+
+
+class DaskExecutor:
+    """Tasks on a dask.distributed cluster (``--cluster tcp://HOST:PORT``). Each trace is scattered to the
+    workers once, so they need neither this machine's files nor a shared filesystem (only the same gpusim)."""
+
+    def __init__(self, address: str, traces: dict[str, object]):
+        try:
+            from distributed import Client
+        except ImportError:                                      # pragma: no cover - a declared dependency
+            raise GpusimError("--cluster needs dask.distributed: pip install 'distributed'") from None
+        try:
+            self.client = Client(address, timeout="15s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise GpusimError(f"--cluster {address}: cannot reach a dask scheduler there ({exc}); start one "
+                              "with 'dask scheduler' and workers with 'dask worker ADDRESS', or drop --cluster") \
+                from None
+        self.traces = traces
+        self.remote: dict[str, object] = {}
+
+    def run(self, tasks: list[Task]) -> Iterator[tuple[Task, list[Outcome]]]:
+        from distributed import as_completed
+        futures = {}
+        for task in tasks:
+            if task.trace_path not in self.remote:
+                self.remote[task.trace_path] = self.client.scatter(self.traces[task.trace_path], broadcast=True)
+            futures[self.client.submit(execute, task, self.remote[task.trace_path], pure=False)] = task
+        for future in as_completed(list(futures)):
+            yield futures[future], future.result()
+
+    def close(self) -> None:
+        self.client.close()
+
+
+def make_executor(workers: int, cluster: str | None, traces: dict[str, object]):
+    if cluster:
+        return DaskExecutor(cluster, traces)
+    if workers <= 1:
+        return InlineExecutor(traces)
+    return LocalExecutor(workers)

@@ -1,0 +1,155 @@
+"""The run grid of an experiment: scenes x GPUs x gpu-set axes x each scheme's parameter grid x fidelity.
+
+:func:`expand` turns a validated :class:`~gpusim.experiment.spec.Experiment`
+into :class:`RunSpec` s in a fixed order (scene, GPU, gpu-set values, scheme
+table, parameter values, fidelity level innermost), building every GPU config
+and scheme once so a bad value fails before anything runs. A combination a
+scheme cannot run is kept as a run with a ``skip`` reason, never failed.
+
+A run's id (:func:`run_id`) is a stable hash of its resolved config and the
+content of its trace, so a finished run is recognised in any later sweep.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gpusim.config import to_dict
+from gpusim.errors import ConfigError
+from gpusim.hw import THESIS_RULES
+from gpusim.hw.gpu import GpuConfig
+from gpusim.schemes import make_scheme
+
+#: levels that run the GPU model (the others ignore the GPU)
+GPU_LEVELS = ("analytic", "sampled", "full")
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a run's trace comes from: a scene (with overrides) or a trace file."""
+
+    label: str                               # the ``scene`` column
+    kind: str                                # "scene" or "trace"
+    spec: str                                # the scene name or file, or the trace path
+    overrides: tuple[str, ...] = ()          # scene --set overrides (size, scene-set values)
+    scene_set: tuple[tuple[str, Any], ...] = ()
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One grid point."""
+
+    index: int
+    source: Source
+    gpu: str
+    gpu_set: tuple[tuple[str, Any], ...]
+    gpu_config: GpuConfig
+    label: str                               # the [schemes.LABEL] table (the ``variant`` column)
+    scheme: str
+    params: dict                             # resolved: every parameter with its default filled in
+    fidelity: str
+    skip: str | None = None
+
+    @property
+    def group_key(self) -> tuple:
+        """Runs that share one functional model run: same trace, scheme table and parameters."""
+        return (self.source, self.label, json.dumps(self.params, sort_keys=True))
+
+
+def skip_reason(scheme: str, fidelity: str) -> str | None:
+    """Why ``scheme`` cannot run at ``fidelity`` (None when it can)."""
+    if fidelity == "thesis" and scheme not in THESIS_RULES:
+        return (f"fidelity 'thesis' models only {', '.join(sorted(THESIS_RULES))} (seed 003 section 4.3.2)")
+    return None
+
+
+def set_combinations(axes: dict[str, list[Any]]) -> list[tuple[tuple[str, Any], ...]]:
+    """Every combination of the axes' values, in file order (one empty combination without axes)."""
+    keys = list(axes)
+    return [tuple(zip(keys, values)) for values in itertools.product(*(axes[k] for k in keys))]
+
+
+def _toml_value(value: Any) -> str:
+    return json.dumps(value) if not isinstance(value, bool) else ("true" if value else "false")
+
+
+def scene_overrides(exp, combo: tuple[tuple[str, Any], ...]) -> list[str]:
+    """Scene ``--set`` overrides for the experiment's size and one scene-set combination."""
+    out = [f"{k}={_toml_value(v)}" for k, v in combo]
+    if exp.size:
+        out += [f"screen.width={exp.size[0]}", f"screen.height={exp.size[1]}"]
+    return out
+
+
+def sources(exp) -> list[Source]:
+    out = []
+    for scene in exp.scenes:
+        spec = str(exp.resolve_path(scene)) if Path(scene).suffix else scene
+        for combo in set_combinations(exp.scene_set):
+            out.append(Source(Path(scene).stem if Path(scene).suffix else scene, "scene", spec,
+                              tuple(scene_overrides(exp, combo)), combo))
+    for trace in exp.traces:
+        out.append(Source(Path(trace).stem, "trace", str(exp.resolve_path(trace))))
+    return out
+
+
+def _params(entry, where: str) -> list[dict]:
+    keys = list(entry.axes)
+    grid = []
+    for values in itertools.product(*(entry.axes[k] for k in keys)):
+        given = dict(zip(keys, values))
+        grid.append(make_scheme(entry.scheme, given, where=f"{where}: schemes.{entry.label}").params())
+    return grid
+
+
+def expand(exp) -> list[RunSpec]:
+    """Every grid point of ``exp`` in order; bad GPU keys, scheme parameters and values fail here."""
+    from gpusim.experiment.spec import build_gpu
+    gpu_combos = set_combinations(exp.gpu_set)
+    machines: dict[tuple, GpuConfig] = {}
+    for gpu in exp.gpus:
+        for combo in gpu_combos:
+            machines[(gpu, combo)] = build_gpu(gpu, [f"{k}={_toml_value(v)}" for k, v in combo], exp)
+    params = {entry.label: _params(entry, exp.path) for entry in exp.schemes}
+    runs: list[RunSpec] = []
+    for source in sources(exp):
+        for gpu in exp.gpus:
+            for combo in gpu_combos:
+                for entry in exp.schemes:
+                    for p in params[entry.label]:
+                        for level in exp.fidelity:
+                            runs.append(RunSpec(len(runs), source, gpu, combo, machines[(gpu, combo)],
+                                                entry.label, entry.scheme, p, level,
+                                                skip_reason(entry.scheme, level)))
+    if not runs:
+        raise ConfigError(f"{exp.path}: the grid is empty; give at least one scene, GPU, level and scheme")
+    return runs
+
+
+def gpu_identity(config: GpuConfig) -> dict:
+    """The GPU config as it enters a run's id: ``runner.workers`` changes no figure, so it is left out."""
+    data = to_dict(config)
+    data["runner"] = {k: v for k, v in data["runner"].items() if k != "workers"}
+    return data
+
+
+def resolved_run(run: RunSpec, trace_sha: str) -> dict:
+    """The run's resolved config: what its id hashes and what ``runs/<run>/config.toml`` records."""
+    return {"scene": run.source.label, "source": {"kind": run.source.kind, "spec": run.source.spec,
+                                                  "overrides": list(run.source.overrides)},
+            "scene_set": dict(run.source.scene_set), "trace_sha256": trace_sha, "scheme": run.scheme, "variant": run.label, "params": run.params,
+            "fidelity": run.fidelity, "gpu": run.gpu, "gpu_set": dict(run.gpu_set),
+            "gpu_config": gpu_identity(run.gpu_config)}
+
+
+def run_id(run: RunSpec, trace_sha: str) -> str:
+    """A stable 16-hex-digit id of the run's resolved config and its trace's content (where the trace came
+    from, a path, is left out: the content decides)."""
+    identity = {k: v for k, v in resolved_run(run, trace_sha).items() if k != "source"}
+    text = json.dumps(identity, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

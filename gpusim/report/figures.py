@@ -1,0 +1,181 @@
+"""The figures of an experiment report (matplotlib's object API: no pyplot, no global state).
+
+Each function takes frames from :mod:`gpusim.report.tables` and writes one PNG
+atomically, kept under :data:`MAX_PNG_BYTES` (the resolution is lowered until
+it fits). Every axis names its unit; every title names the fidelity level that
+made its numbers.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from gpusim.atomic_io import atomic_output
+from gpusim.report.tables import pareto
+
+MAX_PNG_BYTES = 200_000
+_DPIS = (100, 80, 64, 50, 40)
+
+
+def save(fig: Figure, path: Path) -> Path:
+    """Write ``fig`` as a PNG under MAX_PNG_BYTES (at the highest resolution of _DPIS that fits)."""
+    FigureCanvasAgg(fig)
+    data = b""
+    for dpi in _DPIS:
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png", dpi=dpi)
+        data = buffer.getvalue()
+        if len(data) <= MAX_PNG_BYTES:
+            break
+    with atomic_output(path) as handle:
+        handle.write(data)
+    return path
+
+
+def _colours(names: list[str]) -> dict[str, tuple]:
+    from matplotlib import colormaps
+    cmap = colormaps["tab20"]
+    return {n: cmap(i % 20) for i, n in enumerate(names)}
+
+
+def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) -> Path:
+    """Image error (RMSE; share of differing pixels) against simulated cycles, one point per configuration,
+    the Pareto front drawn and its points labelled."""
+    fig = Figure(figsize=(11, 4.6))
+    colours = _colours(list(dict.fromkeys(points["scheme"])))
+    for ax, column, label in zip(fig.subplots(1, 2), ("rmse", "differing_share"),
+                                 ("RMSE against the exact reference (RGB in [0, 1])",
+                                  "pixels differing by more than 1/255 (% of screen)")):
+        scale = 100.0 if column == "differing_share" else 1.0
+        for scheme, rows in points.groupby("scheme", sort=False):
+            ax.scatter(rows["cycles"], rows[column] * scale, s=28, color=colours[scheme], label=scheme,
+                       edgecolors="black", linewidths=0.4, zorder=3)
+        front = pareto(points, "cycles", column)
+        if len(front):
+            xs, ys = front["cycles"].to_numpy(), front[column].to_numpy() * scale
+            ax.step(xs, ys, where="post", color="black", linewidth=1.0, alpha=0.7, zorder=2, label="Pareto front")
+            for x, y, text in zip(xs, ys, front["config"]):
+                ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        ax.set_xscale("log")
+        ax.set_xlabel(f"simulated cycles ({level} level, shader clock)")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.25)
+    fig.axes[0].legend(fontsize=7, loc="best", ncol=2)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def fidelity_vs_wall(errors: pd.DataFrame, full_walls: pd.Series, title: str, path: Path) -> Path:
+    """Each approximate level's cycle error against the full level, against its wall time (one point per
+    run); the full level's own wall times are drawn at zero error for reference."""
+    fig = Figure(figsize=(8, 4.6))
+    ax = fig.subplots()
+    markers = {"analytic": ("o", "tab:blue"), "sampled": ("s", "tab:orange")}
+    for level, rows in errors.groupby("fidelity", sort=False):
+        marker, colour = markers.get(level, ("^", "tab:green"))
+        ax.scatter(rows["wall_seconds"], 100.0 * rows["cycle_error"], marker=marker, color=colour, s=30,
+                   edgecolors="black", linewidths=0.4, label=f"{level} ({len(rows)} runs)", zorder=3)
+    ax.scatter(full_walls, np.zeros(len(full_walls)), marker="|", color="black", s=80,
+               label=f"full ({len(full_walls)} runs: the reference)", zorder=2)
+    ax.axhline(0.0, color="black", linewidth=0.6)
+    ax.set_xscale("log")
+    ax.set_xlabel("wall time of the timing model (s, this machine)")
+    ax.set_ylabel("cycle error against the full level (%)")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def stacked_bars(table: pd.DataFrame, xlabel: str, title: str, path: Path, scale: float = 1.0,
+                 log: bool = False) -> Path:
+    """Horizontal bars, one per row of ``table``, stacked by its columns (e.g. footprint by structure)."""
+    table = table.fillna(0.0)
+    fig = Figure(figsize=(9, 1.2 + 0.32 * len(table)))
+    ax = fig.subplots()
+    left = np.zeros(len(table))
+    colours = _colours(list(table.columns))
+    labels = list(table.index)
+    for column in table.columns:
+        values = table[column].to_numpy(dtype=float) / scale
+        ax.barh(labels, values, left=left, color=colours[column], label=str(column), edgecolor="white",
+                linewidth=0.3)
+        left += values
+    if log:
+        ax.set_xscale("log")
+    ax.invert_yaxis()
+    ax.set_xlabel(xlabel)
+    ax.tick_params(axis="y", labelsize=7)
+    ax.legend(fontsize=6, ncol=3, loc="lower right")
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, axis="x", alpha=0.25)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def cycles_and_units(cycles: pd.Series, utilisation: pd.DataFrame, level: str, title: str, path: Path) -> Path:
+    """Cycles per configuration (bars, log scale) beside where they go: each hardware unit's mean
+    utilisation (busy cycles / run cycles) as a heat map."""
+    rows = list(cycles.index)
+    fig = Figure(figsize=(11, 1.4 + 0.32 * len(rows)))
+    left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.1, 1]})
+    left.barh(rows, cycles.to_numpy(dtype=float), color="tab:blue")
+    left.set_xscale("log")
+    left.invert_yaxis()
+    left.set_xlabel(f"simulated cycles ({level} level)")
+    left.tick_params(axis="y", labelsize=7)
+    left.grid(True, axis="x", which="both", alpha=0.25)
+    if not utilisation.empty:
+        util = utilisation.reindex(rows)
+        im = right.imshow(100.0 * util.to_numpy(dtype=float), aspect="auto", cmap="viridis", vmin=0, vmax=100)
+        right.set_xticks(range(len(util.columns)), [str(c) for c in util.columns], rotation=45, fontsize=7)
+        right.set_yticks(range(len(rows)), [""] * len(rows))
+        for (i, j), v in np.ndenumerate(util.to_numpy(dtype=float)):
+            if not math.isnan(v):
+                right.text(j, i, f"{100 * v:.0f}", ha="center", va="center", fontsize=6,
+                           color="white" if v < 0.6 else "black")
+        fig.colorbar(im, ax=right, label="mean utilisation (% of run cycles)")
+        right.set_title("where the cycles go: unit utilisation", fontsize=9)
+    else:
+        right.set_axis_off()
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def image_grid(reference: np.ndarray, images: list[tuple[str, np.ndarray]], title: str, path: Path,
+               max_steps: int = 32) -> Path:
+    """The exact reference, then each image above its difference map (largest channel difference from the
+    reference in 8-bit steps, clipped at ``max_steps``). Images are 8-bit rows, top row first."""
+    cols = min(6, len(images) + 1)
+    pairs = -(-(len(images) + 1) // cols)
+    cell = 1.9 * reference.shape[0] / reference.shape[1] + 0.3       # inches: the image and its title
+    fig = Figure(figsize=(1.9 * cols + 1.2, 2 * cell * pairs + 0.5), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(2 * pairs, cols))
+    for ax in axes.flat:
+        ax.set_axis_off()
+    entries = [("exact reference", reference)] + images
+    im = None
+    for n, (name, image) in enumerate(entries):
+        r, c = divmod(n, cols)
+        axes[2 * r, c].imshow(image, interpolation="nearest")
+        axes[2 * r, c].set_title(name, fontsize=7)
+        if n:
+            diff = np.abs(image.astype(np.int16) - reference.astype(np.int16)).max(axis=2)
+            im = axes[2 * r + 1, c].imshow(np.minimum(diff, max_steps), cmap="inferno", vmin=0, vmax=max_steps,
+                                           interpolation="nearest")
+            axes[2 * r + 1, c].set_title(f"{int((diff > 1).sum()):,} px off > 1 step", fontsize=6)
+    if im is not None:
+        fig.colorbar(im, ax=list(axes[1::2].flat), fraction=0.02,
+                     label=f"|image - reference| (8-bit steps, max channel, clipped at {max_steps})")
+    fig.suptitle(title, fontsize=10)
+    return save(fig, path)
