@@ -9,6 +9,7 @@ second once per GPU and fidelity level.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -22,6 +23,17 @@ from gpusim.schemes.result import SchemeResult, Stat
 from gpusim.trace import FragmentTrace
 
 ERROR_KEYS = ("rmse", "psnr", "differing_pixels", "differing_share", "max_abs")
+
+
+def jsonable(value):
+    """A record ready for JSON: non-finite floats as "inf"/"-inf" (NaN as null), tuples as lists."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    return value
 
 
 def parse_params(items: list[str] | None) -> dict[str, Any]:

@@ -105,15 +105,3 @@ def test_replay_thesis_fidelity_reports_cycles(trace_file, capsys):
     assert main(["replay", str(trace_file), "--scheme", "kbuffer", "--fidelity", "thesis"]) == 2
     err = capsys.readouterr().err
     assert "models only r-buffer, tfss, weight-factor" in err and len(err.strip().splitlines()) == 1
-
-
-def test_vary_sweeps_one_parameter_and_writes_markdown(trace_file, tmp_path, capsys):
-    out = tmp_path / "df.md"
-    assert main(["vary", str(trace_file), "--scheme", "lucidraster", "--vary", "depth_filter=1,3",
-                 "--stat", "invalid_pixels", "--json", "-o", str(out)]) == 0
-    rows = json.loads(capsys.readouterr().out)
-    assert [r["depth_filter"] for r in rows] == [1, 3] and rows[0]["invalid_pixels"] >= rows[1]["invalid_pixels"]
-    assert "| depth_filter | invalid_pixels |" in out.read_text()
-    assert main(["vary", str(trace_file), "--scheme", "lucidraster", "--vary", "depth_filter=3",
-                 "--stat", "nope"]) == 2
-    assert "has no such stat" in capsys.readouterr().err

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 
 from gpusim.errors import GpusimError
+from gpusim.replay import jsonable
 from gpusim.trace import MAX_SCREEN_SIDE
 
 
@@ -20,16 +20,6 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (1 <= w <= MAX_SCREEN_SIDE and 1 <= h <= MAX_SCREEN_SIDE):
         raise GpusimError(f"--size {text}: each side must lie in 1..{MAX_SCREEN_SIDE} pixels")
     return w, h
-
-
-def jsonable(value):
-    if isinstance(value, float) and not math.isfinite(value):
-        return None if math.isnan(value) else ("inf" if value > 0 else "-inf")
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    return value
 
 
 def print_json(obj) -> None:

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from gpusim.atomic_io import write_text_atomic
-from gpusim.cli.common import jsonable, print_json
+from gpusim.cli.common import print_json
 from gpusim.hw import DEFAULT_GPU, FIDELITIES, gpu_presets, load_gpu
-from gpusim.replay import parse_params, replay
+from gpusim.replay import jsonable, parse_params, replay
 from gpusim.schemes import scheme_names
 from gpusim.trace_io import load_trace
 

@@ -160,8 +160,9 @@ def stat_rows(record: dict) -> list[dict]:
         for s in timing.get("unit_stats", []):
             rows.append(_stat(s["unit"], s["stat"], s["value"], s["unit_of_measure"], s["doc"],
                               f"instance={s['instance']}"))
-        if "unit_stats" not in timing:          # levels without per-instance stats: the per-unit summary
-            for unit, summary in timing.get("units", {}).items():
+        per_instance = {s["unit"] for s in timing.get("unit_stats", [])}
+        for unit, summary in timing.get("units", {}).items():
+            if unit not in per_instance:        # a unit without per-instance stats (the core; analytic units)
                 for stat, value in summary.items():
                     rows.append(_stat(unit, stat, value, "cycles" if stat.endswith("cycles") else "1",
                                       f"{stat} of the {unit} units ({timing['fidelity']} estimate)"))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import socket
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -76,6 +77,19 @@ class LocalExecutor:
             child.join(timeout=5)
 
 
+def _probe(address: str) -> None:
+    """Fail at once, in one line, when nothing listens at a tcp:// scheduler address (dask would retry
+    until its timeout)."""
+    if not address.startswith("tcp://"):
+        return
+    host, _, port = address.removeprefix("tcp://").rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=5).close()
+    except (OSError, ValueError) as exc:
+        raise GpusimError(f"--cluster {address}: cannot reach a dask scheduler there ({exc}); start one with "
+                          "'dask scheduler' and workers with 'dask worker ADDRESS', or drop --cluster") from None
+
+
 class DaskExecutor:
     """Tasks on a dask.distributed cluster (``--cluster tcp://HOST:PORT``). Each trace is scattered to the
     workers once, so they need neither this machine's files nor a shared filesystem (only the same gpusim)."""
@@ -85,6 +99,7 @@ class DaskExecutor:
             from distributed import Client
         except ImportError:                                      # pragma: no cover - a declared dependency
             raise GpusimError("--cluster needs dask.distributed: pip install 'distributed'") from None
+        _probe(address)
         try:
             self.client = Client(address, timeout="15s")
         except (OSError, TimeoutError, ValueError) as exc:

@@ -149,7 +149,8 @@ def resolved_run(run: RunSpec, trace_sha: str) -> dict:
 
 def run_id(run: RunSpec, trace_sha: str) -> str:
     """A stable 16-hex-digit id of the run's resolved config and its trace's content (where the trace came
-    from, a path, is left out: the content decides)."""
+    from, a path, is left out: the content decides; so is ``runner.workers``, which changes no figure)."""
     identity = {k: v for k, v in resolved_run(run, trace_sha).items() if k != "source"}
+    identity["gpu_set"] = {k: v for k, v in identity["gpu_set"].items() if k != "runner.workers"}
     text = json.dumps(identity, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]

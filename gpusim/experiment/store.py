@@ -25,6 +25,7 @@ import pandas as pd
 
 from gpusim.atomic_io import atomic_output, write_text_atomic
 from gpusim.experiment.execute import Outcome
+from gpusim.replay import jsonable
 
 #: the row's columns before the parameter, override and figure columns
 LEAD_COLUMNS = ("run", "status", "error", "index", "scene", "width", "height", "trace", "gpu", "fidelity",
@@ -119,7 +120,7 @@ class ResultsStore:
                                                                     "config this run's id hashes\n"))
         if outcome.record is not None:
             write_text_atomic(folder / "record.json",
-                              json.dumps(outcome.record, indent=1, default=_json_default) + "\n")
+                              json.dumps(jsonable(outcome.record), indent=1, default=_json_default) + "\n")
         if outcome.images:
             from gpusim.report.images import save_rgb8_png
             for name, image in outcome.images.items():

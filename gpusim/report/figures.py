@@ -48,7 +48,7 @@ def _colours(names: list[str]) -> dict[str, tuple]:
 def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) -> Path:
     """Image error (RMSE; share of differing pixels) against simulated cycles, one point per configuration,
     the Pareto front drawn and its points labelled."""
-    fig = Figure(figsize=(11, 4.6))
+    fig = Figure(figsize=(11, 5.2))
     colours = _colours(list(dict.fromkeys(points["scheme"])))
     for ax, column, label in zip(fig.subplots(1, 2), ("rmse", "differing_share"),
                                  ("RMSE against the exact reference (RGB in [0, 1])",
@@ -58,6 +58,9 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
             ax.scatter(rows["cycles"], rows[column] * scale, s=28, color=colours[scheme], label=scheme,
                        edgecolors="black", linewidths=0.4, zorder=3)
         front = pareto(points, "cycles", column)
+        for x, y, text in zip(points["cycles"], points[column] * scale, points["config"]):
+            if text not in set(front["config"]):
+                ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, -8), fontsize=5.5, color="0.4")
         if len(front):
             xs, ys = front["cycles"].to_numpy(), front[column].to_numpy() * scale
             ax.step(xs, ys, where="post", color="black", linewidth=1.0, alpha=0.7, zorder=2, label="Pareto front")
@@ -67,9 +70,10 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
         ax.set_xlabel(f"simulated cycles ({level} level, shader clock)")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.25)
-    fig.axes[0].legend(fontsize=7, loc="best", ncol=2)
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=min(8, len(labels)), frameon=False)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(labels) / 8), 1, 1))
     return save(fig, path)
 
 

@@ -1,0 +1,384 @@
+"""Experiments: files, overlays and --set, the grid, the results tables, resume, failures, determinism."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from gpusim.cli import main
+from gpusim.errors import ConfigError
+from gpusim.experiment import expand, load_experiment, run_experiment
+from gpusim.experiment.store import WALL_COLUMNS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SMALL = """
+name = "small"
+description = "a small sweep for the tests"
+scenes = ["default"]
+size = "40x32"
+gpus = ["gtx280"]
+fidelity = ["none", "analytic", "full", "thesis"]
+
+[schemes.alpha-blend]
+[schemes.kbuffer]
+k = [2, 4]
+mode = "sort-blend"
+[schemes.tfss]
+"""
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def table(out: Path) -> pd.DataFrame:
+    return pd.read_parquet(out / "results.parquet")
+
+
+def same_table(a: pd.DataFrame, b: pd.DataFrame) -> None:
+    """Equal apart from the wall-time columns."""
+    pd.testing.assert_frame_equal(a.drop(columns=list(WALL_COLUMNS)), b.drop(columns=list(WALL_COLUMNS)))
+
+
+# ------------------------------------------------------------------------------------------ the file and grid
+def test_the_issue_example_gives_one_row_per_grid_point(tmp_path):
+    exp = load_experiment(str(ROOT / "configs" / "experiments" / "kbuffer-k.toml"))
+    runs = expand(exp)
+    # 2 scenes x 1 GPU x 2 reorder-buffer sizes x (alpha-blend + 3 k values) x 2 levels
+    assert len(runs) == 2 * 2 * 4 * 2
+    assert [r.index for r in runs] == list(range(len(runs)))
+    points = {(r.source.label, dict(r.gpu_set)["rop.reorder_entries"], r.label, r.params.get("k"), r.fidelity)
+              for r in runs}
+    assert len(points) == len(runs)
+    kb = [r for r in runs if r.scheme == "kbuffer"]
+    assert {r.params["mode"] for r in kb} == {"sort-blend"} and {r.params["k"] for r in kb} == {2, 4, 8}
+    assert {r.gpu_config.rop.reorder_entries for r in runs} == {16, 64}
+    assert {r.source.overrides for r in runs} == {("screen.width=320", "screen.height=240")}
+
+
+def test_thesis_level_is_skipped_for_other_schemes_with_one_reason(tmp_path):
+    runs = expand(load_experiment(str(write(tmp_path / "e.toml", SMALL))))
+    skipped = [r for r in runs if r.skip]
+    assert {r.scheme for r in skipped} == {"alpha-blend", "kbuffer"} and {r.fidelity for r in skipped} == {"thesis"}
+    assert len({r.skip for r in skipped}) == 1 and "tfss" in skipped[0].skip
+
+
+def test_include_overlays_and_set_overrides(tmp_path):
+    write(tmp_path / "base.toml", SMALL)
+    top = write(tmp_path / "top.toml", 'include = "base.toml"\nname = "top"\nfidelity = ["full"]\n'
+                                       '[schemes.kbuffer]\nk = [8]\n')
+    exp = load_experiment(str(top))
+    assert exp.name == "top" and exp.fidelity == ["full"] and exp.size == (40, 32)
+    kb = next(e for e in exp.schemes if e.label == "kbuffer")
+    assert kb.axes == {"k": [8], "mode": ["sort-blend"]}           # tables merge key by key
+    exp = load_experiment(str(top), ['fidelity=["analytic", "full"]', "schemes.kbuffer.k=[2, 16]",
+                                     "gpu-set.rop.reorder_entries=[8, 32]", 'size="24x16"'])
+    runs = expand(exp)
+    assert exp.fidelity == ["analytic", "full"] and exp.size == (24, 16)
+    assert {r.params["k"] for r in runs if r.scheme == "kbuffer"} == {2, 16}
+    assert {dict(r.gpu_set)["rop.reorder_entries"] for r in runs} == {8, 32}
+    assert len(runs) == 2 * 4 * 2                      # reorder sizes x (alpha-blend, 2 k, tfss) x levels
+
+
+def test_config_command_prints_runs_and_count(tmp_path, capsys):
+    path = write(tmp_path / "e.toml", SMALL)
+    assert main(["config", str(path)]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[-1] == "16 runs (3 skipped)"
+    assert sum("kbuffer" in line and "k=2 mode=sort-blend" in line for line in out) == 4
+    assert not (tmp_path / "reports").exists()
+    assert main(["config", str(path), "--toml", "--set", "schemes.kbuffer.k=[4]"]) == 0
+    resolved = tomllib.loads(capsys.readouterr().out)
+    assert resolved["schemes"]["kbuffer"] == {"k": [4], "mode": "sort-blend"} and resolved["size"] == "40x32"
+
+
+@pytest.mark.parametrize("text, message", [
+    ('scenes = ["default"]\nbogus = 1\n[schemes.alpha-blend]\n', "bogus: unknown key (valid: name, description"),
+    ('scenes = ["default"]\n[schemes.teapot]\n', "schemes.teapot: unknown scheme 'teapot' (valid: alpha-blend"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\nkk = 4\n', "schemes.kbuffer.kk: unknown parameter of kbuffer "
+                                                          "(valid: k, mode"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\nk = [4, 0]\n', "schemes.kbuffer: k: must be >= 1"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\nmode = "peal"\n', "'peal' is not a valid choice (valid: peel, "
+                                                                  "sort-blend)"),
+    ('scenes = ["default"]\ngpus = ["gtx9999"]\n[schemes.kbuffer]\n', "gpus: 'gtx9999' is not a GPU preset (valid: "
+                                                                      "geforce7900gtx, gtx280, modern)"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\n[gpu-set]\n"rop.entries" = 4\n',
+     "gpu-set: rop.entries: unknown key (valid: units, reorder_entries"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\n[gpu-set]\n"rop.units" = [8, 0]\n', "gpu-set: rop.units: must be >= 1"),
+    ('scenes = ["default"]\nfidelity = ["fast"]\n[schemes.kbuffer]\n', "fidelity: 'fast' is not a level (valid: none, "
+                                                                       "analytic"),
+    ('scenes = ["nowhere"]\n[schemes.kbuffer]\n', "unknown scene 'nowhere' (built-in scenes:"),
+    ('traces = ["missing.npz"]\n[schemes.kbuffer]\n', "traces: missing.npz: no such file"),
+    ('scenes = ["default"]\nsize = "big"\n[schemes.kbuffer]\n', "size: expected WIDTHxHEIGHT"),
+    ('scenes = ["default"]\n', "schemes: name at least one scheme"),
+    ('scenes = ["default"]\ninclude = "nope.toml"\n[schemes.kbuffer]\n', "include: nope.toml: no such file"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\nk = [4, 4]\n', "schemes.kbuffer.k: lists 4 twice"),
+    ('scenes = ["default"]\n[scene-set]\n"camera.fov" = 40\n[schemes.kbuffer]\n', "camera.fov: unknown key"),
+    ('scenes = ["default"\n', "invalid TOML"),
+])
+def test_bad_experiment_fails_before_running_with_one_line(tmp_path, capsys, text, message):
+    path = write(tmp_path / "bad.toml", text)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("gpusim: error: ") and str(path) in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--set", "fidelity"], "expected KEY=VALUE"),
+    (["--set", "schemes.kbuffer.k=[0]"], "k: must be >= 1"),
+    (["--workers", "0"], "--workers 0: give at least 1"),
+    (["--cluster", "tcp://127.0.0.1:9", "--workers", "2"], "exclude each other"),
+])
+def test_bad_command_line_is_one_line(tmp_path, capsys, args, message):
+    path = write(tmp_path / "e.toml", SMALL)
+    assert main(["run", str(path), "-o", str(tmp_path / "out"), "--quiet", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_unreachable_cluster_is_one_line(tmp_path, capsys):
+    path = write(tmp_path / "e.toml", SMALL.replace('["none", "analytic", "full", "thesis"]', '["none"]'))
+    assert main(["run", str(path), "-o", str(tmp_path / "out"), "--quiet", "--cluster", "tcp://127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot reach a dask scheduler" in err and len(err.strip().splitlines()) == 1
+
+
+# ------------------------------------------------------------------------------------------- running a sweep
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    """The small sweep run once in this process; (experiment file, output directory)."""
+    folder = tmp_path_factory.mktemp("small")
+    path = write(folder / "e.toml", SMALL)
+    out = folder / "out"
+    summary = run_experiment(load_experiment(str(path)), out, workers=1, quiet=True)
+    assert summary.failed == 0 and summary.skipped == 3 and summary.ok == 13
+    return path, out
+
+
+def test_results_table_has_a_row_per_run_with_axes_and_figures(small_run):
+    _, out = small_run
+    t = table(out)
+    assert len(t) == 16 and t["run"].is_unique and list(t["index"]) == list(range(16))
+    assert t.equals(pd.read_parquet(out / "results.parquet"))
+    csv = pd.read_csv(out / "results.csv")
+    assert list(csv.columns) == list(t.columns) and len(csv) == 16
+    for column in ("run", "status", "error", "scene", "gpu", "fidelity", "scheme", "k", "mode", "l_num", "cycles",
+                   "wall_seconds_functional", "wall_seconds_timing", "footprint_bytes", "accesses",
+                   "dropped_fragments", "hazards", "rmse", "psnr", "differing_pixels", "stat.batches"):
+        assert column in t, column
+    ok = t[t["status"] == "ok"]
+    assert set(t["status"]) == {"ok", "skipped"}
+    assert ok[ok["fidelity"] == "none"]["cycles"].isna().all()
+    assert (ok[ok["fidelity"] != "none"]["cycles"] > 0).all()
+    assert ok["stat.batches"].notna().sum() == len(ok[ok["scheme"] == "kbuffer"])       # NaN for other schemes
+    assert ok[(ok["scheme"] == "kbuffer") & (ok["fidelity"] == "full")]["hazards"].notna().all()
+    # the functional figures do not depend on the level
+    kb2 = ok[(ok["scheme"] == "kbuffer") & (ok["k"] == 2)]
+    assert kb2["rmse"].nunique() == 1 and kb2["footprint_bytes"].nunique() == 1
+    tfss = ok[ok["scheme"] == "tfss"]
+    assert set(tfss["fidelity"]) == {"none", "analytic", "full", "thesis"}
+
+
+def test_stats_table_is_long_form_and_agrees_with_the_row(small_run):
+    _, out = small_run
+    t, s = table(out), pd.read_parquet(out / "stats.parquet")
+    assert list(s.columns) == ["run", "unit", "stat", "labels", "value", "value_unit", "description"]
+    assert set(s["run"]) == set(t[t["status"] == "ok"]["run"])
+    row = t[(t["scheme"] == "kbuffer") & (t["fidelity"] == "full") & (t["k"] == 4)].iloc[0]
+    mine = s[s["run"] == row["run"]]
+    accesses = mine[(mine["unit"] == "scheme") & (mine["stat"] == "accesses")]
+    assert accesses["value"].sum() == row["accesses"]
+    assert accesses["labels"].str.match(r"structure=\w+,operation=\w+").all()
+    footprint = mine[(mine["stat"] == "footprint_bytes")]["value"].sum()
+    assert footprint == row["footprint_bytes"]
+    assert mine[(mine["unit"] == "machine") & (mine["stat"] == "cycles")]["value"].iloc[0] == row["cycles"]
+    assert mine[mine["stat"] == "pass_cycles"]["value"].sum() == row["cycles"]
+    assert {"dram"} <= set(mine["unit"]) and mine[mine["unit"] == "dram"]["labels"].str.startswith("instance=").all()
+
+
+def test_each_run_has_its_files(small_run):
+    _, out = small_run
+    t = table(out)
+    assert (out / "resolved.toml").is_file()
+    for _, row in t[t["status"] == "ok"].iterrows():
+        folder = out / "runs" / row["run"]
+        record = json.loads((folder / "record.json").read_text())
+        assert record["scheme"] == row["scheme"] and (folder / "image.png").is_file()
+        assert ("timing" in record) == (row["fidelity"] != "none")
+        assert f"scheme = \"{row['scheme']}\"" in (folder / "config.toml").read_text()
+    full_kb = t[(t["scheme"] == "kbuffer") & (t["fidelity"] == "full")].iloc[0]
+    assert (out / "runs" / full_kb["run"] / "image-timed.png").is_file()
+
+
+def test_rerun_reuses_everything_and_is_deterministic(small_run, tmp_path):
+    path, out = small_run
+    first = table(out)
+    again = run_experiment(load_experiment(str(path)), out, workers=1, quiet=True)
+    assert again.reused == 13 and again.computed == 0
+    same_table(first, table(out))
+    fresh = tmp_path / "fresh"                      # the same experiment computed again from nothing
+    run_experiment(load_experiment(str(path)), fresh, workers=2, quiet=True)
+    same_table(first, table(fresh))
+    a, b = pd.read_parquet(out / "stats.parquet"), pd.read_parquet(fresh / "stats.parquet")
+    pd.testing.assert_frame_equal(a, b)
+
+
+def test_run_ids_follow_config_and_trace_content(small_run, tmp_path):
+    path, out = small_run
+    ids = set(table(out)["run"])
+    other = run_experiment(load_experiment(str(path), ['size="40x30"', 'fidelity=["none"]']), tmp_path / "o",
+                           workers=1, quiet=True)
+    assert other.reused == 0
+    assert not ids & set(table(tmp_path / "o")["run"])
+    same = load_experiment(str(path), ["gpu-set.runner.workers=1"])          # changes no figure: same ids
+    assert {r.gpu_config.runner.workers for r in expand(same)} == {1}
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    assert run_experiment(same, copy, workers=1, quiet=True).reused == 13
+
+
+def test_failed_runs_are_rows_and_the_exit_status_says_so(tmp_path, capsys):
+    path = write(tmp_path / "e.toml", SMALL.replace("[schemes.alpha-blend]", "[gpu-set]\n\"runner.max_cycles\" = 2000"
+                                                    "\n[schemes.alpha-blend]"))
+    out = tmp_path / "out"
+    code = main(["run", str(path), "-o", str(out), "--quiet", "--workers", "1", "--no-report"])
+    lines = capsys.readouterr().out.strip().splitlines()
+    t = table(out)
+    failed = t[t["status"] == "failed"]
+    assert code == 1 and lines[-1] == f"{len(failed)} of 16 runs failed"
+    assert len(failed) and set(failed["fidelity"]) == {"full"}
+    assert failed["error"].str.contains("max_cycles").all() and not failed["error"].str.contains("\n").any()
+    assert failed["footprint_bytes"].notna().all()                 # the functional figures are kept
+    assert (t[t["fidelity"] == "none"]["status"] == "ok").all()
+    assert not any((out / "runs" / r / "outcome.json").read_text().count('"ok"') for r in failed["run"])
+    again = run_experiment(load_experiment(str(path)), out, workers=1, quiet=True)
+    assert again.computed == len(failed)                          # a failed run is tried again
+
+
+def test_a_trace_file_experiment_sweeps_one_axis(tmp_path):
+    from gpusim.scene import load_scene, trace_scene
+    from gpusim.trace_io import save_trace
+    scene, base = load_scene("foliage", ["screen.width=48", "screen.height=48", "objects.1.count=200"])
+    save_trace(trace_scene(scene, base, progress=False), tmp_path / "f.npz")
+    path = write(tmp_path / "df.toml", 'traces = ["f.npz"]\nfidelity = ["none"]\n'
+                                       '[schemes.lucidraster]\ndepth_filter = [1, 3]\n')
+    run_experiment(load_experiment(str(path)), tmp_path / "out", workers=1, quiet=True)
+    t = table(tmp_path / "out")
+    assert list(t["depth_filter"]) == [1, 3] and list(t["scene"]) == ["f", "f"]
+    assert t["stat.invalid_pixels"].iloc[0] >= t["stat.invalid_pixels"].iloc[1]
+
+
+# ------------------------------------------------------------------------------------ interruption and resume
+KILL = SMALL.replace('size = "40x32"', 'size = "64x48"').replace(
+    '[schemes.tfss]', '[schemes.tfss]\nl_num = [1, 2, 3]\n[schemes.freepipe-abuffer]\nlayers = [4, 8, 16]\n'
+                      '[schemes.depth-peeling]\n[schemes.dual-depth-peeling]\n[schemes.r-buffer]')
+
+
+def _finished(out: Path) -> int:
+    return sum(1 for _ in (out / "runs").glob("*/outcome.json")) if (out / "runs").is_dir() else 0
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_a_killed_sweep_resumes_to_the_same_table(tmp_path, sig):
+    path = write(tmp_path / "e.toml", KILL)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "gpusim", "run", str(path), "-o", str(out), "--workers", "2", "--quiet",
+           "--no-report"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    deadline = time.monotonic() + 120
+    while _finished(out) < 3 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert proc.poll() is None, "the sweep ended before it could be killed; make it longer"
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == (-signal.SIGKILL if sig == signal.SIGKILL else 130)
+    if sig == signal.SIGTERM:
+        assert b"run the same command again to resume" in err
+    done = _finished(out)
+    total = len(expand(load_experiment(str(path))))
+    assert 3 <= done < total - 4
+    if (out / "results.parquet").exists():                          # never corrupt: it reads
+        pd.read_parquet(out / "results.parquet")
+    resumed = run_experiment(load_experiment(str(path)), out, workers=2, quiet=True)
+    assert resumed.reused >= done - 2 and resumed.failed == 0       # at most the runs in flight are lost
+    reference = run_experiment(load_experiment(str(path)), tmp_path / "ref", workers=1, quiet=True)
+    assert reference.failed == 0
+    same_table(table(tmp_path / "ref"), table(out))
+    time.sleep(1.0)                                                 # orphaned workers notice and leave
+    if sys.platform.startswith("linux"):
+        ps = subprocess.run(["ps", "-eo", "ppid,args"], capture_output=True, text=True).stdout
+        assert not [line for line in ps.splitlines() if line.strip().startswith("1 ") and "spawn_main" in line
+                    and str(os.getpid()) not in line]
+
+
+# ------------------------------------------------------------------------------------------------ dask
+def test_dask_cluster_gives_the_same_table(small_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    path, out = small_run
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        summary = run_experiment(load_experiment(str(path)), tmp_path / "dask", cluster=cluster.scheduler_address,
+                                 quiet=True)
+    assert summary.computed == 13 and summary.failed == 0
+    same_table(table(out), table(tmp_path / "dask"))
+
+
+# ------------------------------------------------------------------------------------------------ report
+def test_report_has_both_error_against_time_figures(small_run, tmp_path):
+    from gpusim.report.experiment import write_report
+    from gpusim.report.figures import MAX_PNG_BYTES
+    _, out = small_run
+    index = write_report(out, tmp_path / "report")
+    text = index.read_text()
+    for heading in ("## Error against run time", "### Image error against simulated cycles",
+                    "### The simulator's own fidelity", "## Footprint by structure",
+                    "## Accesses by structure and operation", "## Cycles and where they go", "## RMW hazards",
+                    "## Images", "## Skipped and failed runs"):
+        assert heading in text, heading
+    figs = sorted(p.name for p in (tmp_path / "report" / "figures").glob("*.png"))
+    assert any(n.startswith("error-vs-cycles") for n in figs) and "fidelity-vs-wall.png" in figs
+    for name in figs:
+        assert f"(figures/{name})" in text
+        assert (tmp_path / "report" / "figures" / name).stat().st_size < MAX_PNG_BYTES
+    assert "(full level)" in text or "full level" in text
+
+
+def test_report_command_on_a_directory_without_results(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2
+    assert "no results.parquet here" in capsys.readouterr().err
+
+
+def test_core_does_not_import_matplotlib():
+    code = ("import sys, gpusim, gpusim.experiment, gpusim.hw, gpusim.schemes, gpusim.replay, gpusim.metrics, "
+            "gpusim.experiment.runner, gpusim.experiment.executors; "
+            "assert 'matplotlib' not in sys.modules, sorted(m for m in sys.modules if 'matplotlib' in m)")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_committed_quick_start_report_is_complete_and_small():
+    report = ROOT / "reports" / "quick-start"
+    text = (report / "index.md").read_text()
+    assert "![image error against cycles" in text and "![cycle error against wall time]" in text
+    for png in (report / "figures").glob("*.png"):
+        assert png.stat().st_size < 200_000, png
+    t = pd.read_parquet(report / "results.parquet")
+    assert set(t["fidelity"]) >= {"analytic", "sampled", "full"} and (t["status"] != "failed").all()
+    exp = load_experiment("quick-start")
+    assert len(t) == len(expand(exp))
+    with pytest.raises(ConfigError):
+        load_experiment("no-such-experiment")
