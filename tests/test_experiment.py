@@ -382,3 +382,19 @@ def test_committed_quick_start_report_is_complete_and_small():
     assert len(t) == len(expand(exp))
     with pytest.raises(ConfigError):
         load_experiment("no-such-experiment")
+
+
+def test_a_scheme_twice_under_labels_and_scene_set_axes(tmp_path):
+    path = write(tmp_path / "e.toml", 'scenes = ["default"]\nsize = "24x20"\nfidelity = ["none"]\n'
+                                      '[scene-set]\n"screen.background" = [[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]\n'
+                                      '[schemes.kbuffer]\nk = 2\n'
+                                      '[schemes.kb-blender]\nscheme = "kbuffer"\nhw = "blender"\n')
+    runs = expand(load_experiment(str(path)))
+    assert [(r.label, r.scheme) for r in runs[:2]] == [("kbuffer", "kbuffer"), ("kb-blender", "kbuffer")]
+    assert len(runs) == 4 and runs[2].source.scene_set == (("screen.background", (0.0, 0.0, 0.0)),)
+    run_experiment(load_experiment(str(path)), tmp_path / "out", workers=1, quiet=True)
+    t = table(tmp_path / "out")
+    assert list(t["variant"]) == ["kbuffer", "kb-blender"] * 2 and list(t["hw"][:2]) == ["texture-rmw", "blender"]
+    assert t["scene.screen.background"].nunique() == 2 and t["run"].is_unique
+    with pytest.raises(ConfigError, match="schemes.kb: unknown scheme 'kbuf'"):
+        load_experiment(str(write(tmp_path / "b.toml", 'scenes = ["default"]\n[schemes.kb]\nscheme = "kbuf"\n')))

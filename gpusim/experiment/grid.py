@@ -68,10 +68,15 @@ def skip_reason(scheme: str, fidelity: str) -> str | None:
     return None
 
 
+def _frozen(value: Any) -> Any:
+    return tuple(_frozen(v) for v in value) if isinstance(value, (list, tuple)) else value
+
+
 def set_combinations(axes: dict[str, list[Any]]) -> list[tuple[tuple[str, Any], ...]]:
-    """Every combination of the axes' values, in file order (one empty combination without axes)."""
+    """Every combination of the axes' values, in file order (one empty combination without axes); a value
+    that is itself a list becomes a tuple, so combinations can be compared and hashed."""
     keys = list(axes)
-    return [tuple(zip(keys, values)) for values in itertools.product(*(axes[k] for k in keys))]
+    return [tuple(zip(keys, map(_frozen, values))) for values in itertools.product(*(axes[k] for k in keys))]
 
 
 def _toml_value(value: Any) -> str:
