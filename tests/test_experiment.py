@@ -398,3 +398,14 @@ def test_a_scheme_twice_under_labels_and_scene_set_axes(tmp_path):
     assert t["scene.screen.background"].nunique() == 2 and t["run"].is_unique
     with pytest.raises(ConfigError, match="schemes.kb: unknown scheme 'kbuf'"):
         load_experiment(str(write(tmp_path / "b.toml", 'scenes = ["default"]\n[schemes.kb]\nscheme = "kbuf"\n')))
+
+
+def test_a_malformed_trace_fails_in_one_line_before_any_output(tmp_path, capsys):
+    (tmp_path / "bad.npz").write_bytes(b"PK\x03\x04 not really a zip")
+    path = write(tmp_path / "e.toml", 'scenes = ["default"]\nsize = "16x16"\ntraces = ["bad.npz"]\n'
+                                      'fidelity = ["none"]\n[schemes.alpha-blend]\n')
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "bad.npz" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()

@@ -65,7 +65,9 @@ def test_replay_rejects_a_packing_run_it_cannot_do(tmp_path, capsys):
 def test_schemes_lists_parameters_with_units(capsys):
     assert main(["schemes", "freepipe-mdts"]) == 0
     out = capsys.readouterr().out
-    assert "layers = 20 [entries/pixel]" in out
+    assert "layers = 20 [entries/pixel]  int: " in out and "packing = False  bool: " in out
+    assert "alpha = None [1]  float | None: " in out and "direction = 'min'  'min' | 'max': " in out
+    assert "<class" not in out and "typing." not in out
     assert main(["schemes", "--json"]) == 0
     table = json.loads(capsys.readouterr().out)
     assert "kbuffer" in table and table["kbuffer"]["params"][0]["name"] == "k"

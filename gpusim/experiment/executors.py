@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import socket
 import threading
 import time
@@ -21,8 +22,11 @@ from gpusim.errors import GpusimError
 from gpusim.experiment.execute import Outcome, Task, execute
 
 
-def _watch_parent(parent: int) -> None:
-    """In a worker: exit when the sweep's process is gone (killed with SIGKILL), instead of lingering."""
+def _worker_init(parent: int) -> None:
+    """In a worker: leave Ctrl-C to the sweep's process (it stops the workers), and exit when that process
+    is gone (killed with SIGKILL) instead of lingering."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
     def watch():
         while True:
             if os.getppid() != parent:
@@ -54,7 +58,7 @@ class LocalExecutor:
 
     def __init__(self, workers: int):
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                        initializer=_watch_parent, initargs=(os.getpid(),))
+                                        initializer=_worker_init, initargs=(os.getpid(),))
 
     def run(self, tasks: list[Task]) -> Iterator[tuple[Task, list[Outcome]]]:
         pending = {self.pool.submit(_execute_path, task): task for task in tasks}

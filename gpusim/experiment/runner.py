@@ -98,10 +98,12 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
     store.remove_stale_temporaries()
     summary = Summary(Path(out), runs=len(runs))
 
-    traces, infos = {}, {}
+    built = {}                                 # every trace first: a bad one fails before anything is written
     for source in dict.fromkeys(r.source for r in runs):
         trace = build_trace(source)
-        sha = trace_sha256(trace)
+        built[source] = (trace, trace_sha256(trace))
+    traces, infos = {}, {}
+    for source, (trace, sha) in built.items():
         path = store.save_trace(trace, source.label, sha)
         traces[str(path)] = trace
         infos[source] = {"sha": sha, "path": str(path), "rel": os.path.relpath(path, out),
