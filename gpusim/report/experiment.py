@@ -126,14 +126,18 @@ class _Report:
                                                          "differing_pixels": "differing px"}),
                           {"footprint": "bytes"}), "")
 
+    def _per_scene(self, runs: pd.DataFrame, stat: str):
+        """(scene, ``stat`` pivoted by structure) for each scene with any."""
+        for scene, rows in runs.groupby("scene", sort=False):
+            table = structure_table(self.stats, rows, stat)
+            if not table.empty:
+                yield scene, table
+
     def footprint_and_accesses(self) -> None:
         runs = one_per_functional(self.results)
         self.add("## Footprint by structure", "", "Bytes each structure allocates up front (as its paper sizes "
                  "it), per scene and scheme configuration (the GPU and level do not change them).", "")
-        for scene, rows in runs.groupby("scene", sort=False):
-            table = structure_table(self.stats, rows, "footprint_bytes")
-            if table.empty:
-                continue
+        for scene, table in self._per_scene(runs, "footprint_bytes"):
             path = figures.stacked_bars(table, "footprint (MiB)", f"{scene}: footprint by structure",
                                         self.figdir / f"footprint-{_slug(scene)}.png", scale=2**20)
             self.figure(path, f"footprint by structure, {scene}")
@@ -141,10 +145,7 @@ class _Report:
             self.add(markdown(table, {c: "bytes" for c in table.columns}, index=True), "")
         self.add("## Accesses by structure and operation", "", "Memory operations over all passes, per scene and "
                  "scheme configuration (`structure.operation`).", "")
-        for scene, rows in runs.groupby("scene", sort=False):
-            table = structure_table(self.stats, rows, "accesses")
-            if table.empty:
-                continue
+        for scene, table in self._per_scene(runs, "accesses"):
             cells = pd.DataFrame({"accesses": [", ".join(f"{k} {v:,.0f}" for k, v in row.dropna().items())
                                                for _, row in table.iterrows()],
                                   "total": table.sum(axis=1).to_numpy()}, index=table.index)
