@@ -16,6 +16,7 @@ import os
 import time
 import traceback
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -65,6 +66,11 @@ def one_line(exc: BaseException) -> str:
         at = f" at {os.path.basename(where.filename)}:{where.lineno}" if where else ""
         text = f"internal error {type(exc).__name__}{at}: {exc} (a bug in gpusim; report it with the run's config)"
     return " ".join(text.split())
+
+
+def reference_path(trace_path: str | os.PathLike) -> Path:
+    """Where the exact reference composite of a trace saved by a sweep lies (float64 .npy beside it)."""
+    return Path(trace_path).with_suffix(".reference.npy")
 
 
 def rgb8(image: np.ndarray) -> np.ndarray:
@@ -172,15 +178,18 @@ def stat_rows(record: dict) -> list[dict]:
     return [r for r in rows if r is not None]
 
 
-def execute(task: Task, trace=None) -> list[Outcome]:
-    """Run ``task`` (on ``trace``, or the trace at ``task.trace_path``); one outcome per run, in order."""
+def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
+    """Run ``task`` on ``trace`` and its exact ``reference`` composite (read from ``task.trace_path`` and the
+    reference saved beside it when not given); one outcome per run, in order."""
     from gpusim.metrics import composite_exact
     from gpusim.replay import run_functional, run_timing
     from gpusim.trace_io import load_trace
 
     try:
         trace = trace if trace is not None else load_trace(task.trace_path)
-        reference = composite_exact(trace)
+        if reference is None:
+            saved = reference_path(task.trace_path)
+            reference = np.load(saved) if saved.is_file() else composite_exact(trace)
         result, record, _ = run_functional(trace, task.scheme, task.params, reference,
                                            where=f"{task.where}: schemes")
     except Exception as exc:                 # noqa: BLE001 - every run of the task fails with this line

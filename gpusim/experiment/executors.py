@@ -42,12 +42,13 @@ def _execute_path(task: Task) -> list[Outcome]:
 class InlineExecutor:
     """Tasks one after another in this process (``--workers 1``)."""
 
-    def __init__(self, traces: dict[str, object]):
-        self.traces = traces
+    def __init__(self, traces: dict[str, tuple]):
+        self.traces = traces                 # trace path -> (trace, reference)
 
     def run(self, tasks: list[Task]) -> Iterator[tuple[Task, list[Outcome]]]:
         for task in tasks:
-            yield task, execute(task, self.traces.get(task.trace_path))
+            trace, reference = self.traces.get(task.trace_path, (None, None))
+            yield task, execute(task, trace, reference)
 
     def close(self) -> None:
         pass
@@ -98,7 +99,7 @@ class DaskExecutor:
     """Tasks on a dask.distributed cluster (``--cluster tcp://HOST:PORT``). Each trace is scattered to the
     workers once, so they need neither this machine's files nor a shared filesystem (only the same gpusim)."""
 
-    def __init__(self, address: str, traces: dict[str, object]):
+    def __init__(self, address: str, traces: dict[str, tuple]):
         try:
             from distributed import Client
         except ImportError:                                      # pragma: no cover - a declared dependency
@@ -118,8 +119,11 @@ class DaskExecutor:
         futures = {}
         for task in tasks:
             if task.trace_path not in self.remote:
-                self.remote[task.trace_path] = self.client.scatter(self.traces[task.trace_path], broadcast=True)
-            futures[self.client.submit(execute, task, self.remote[task.trace_path], pure=False)] = task
+                trace, reference = self.traces[task.trace_path]
+                self.remote[task.trace_path] = (self.client.scatter(trace, broadcast=True),
+                                                self.client.scatter(reference, broadcast=True))
+            trace, reference = self.remote[task.trace_path]
+            futures[self.client.submit(execute, task, trace, reference, pure=False)] = task
         for future in as_completed(list(futures)):
             yield futures[future], future.result()
 
@@ -127,7 +131,9 @@ class DaskExecutor:
         self.client.close()
 
 
-def make_executor(workers: int, cluster: str | None, traces: dict[str, object]):
+def make_executor(workers: int, cluster: str | None, traces: dict[str, tuple]):
+    """``traces`` maps a saved trace's path to (trace, exact reference) for the executors that hand them over
+    in memory; local worker processes read both from the files."""
     if cluster:
         return DaskExecutor(cluster, traces)
     if workers <= 1:

@@ -18,7 +18,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gpusim.experiment.execute import Outcome, Task, TaskRun
+import numpy as np
+
+from gpusim.experiment.execute import Outcome, Task, TaskRun, reference_path
 from gpusim.experiment.executors import make_executor
 from gpusim.experiment.grid import GPU_LEVELS, RunSpec, expand, resolved_run, run_id
 from gpusim.experiment.spec import Experiment
@@ -105,7 +107,7 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
     traces, infos = {}, {}
     for source, (trace, sha) in built.items():
         path = store.save_trace(trace, source.label, sha)
-        traces[str(path)] = trace
+        traces[str(path)] = (trace, np.load(reference_path(path)))
         infos[source] = {"sha": sha, "path": str(path), "rel": os.path.relpath(path, out),
                          "width": trace.width, "height": trace.height}
     ids = [run_id(r, infos[r.source]["sha"]) for r in runs]

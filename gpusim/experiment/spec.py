@@ -56,6 +56,7 @@ TOP_KEYS = {
     "schemes": "one table per scheme: its parameters (a list is an axis)",
     "gpu-set": "GPU config overrides (a list is an axis)",
     "scene-set": "scene overrides applied to every scene (a list is an axis)",
+    "paper": "a paper comparison (gpusim.papers): the report opens with its Paper vs gpusim table",
 }
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
@@ -255,6 +256,11 @@ def experiment_from_data(data: dict, where: str, base_dir: Path, default_name: s
     size = _parse_size(data["size"], where) if "size" in data else None
     if size and traces and not scenes:
         raise ConfigError(f"{where}: size: a trace's screen is fixed; size applies to scenes only")
+    if "paper" in data:
+        from gpusim.papers import paper_names
+        if data["paper"] not in paper_names():
+            raise ConfigError(f"{where}: paper: {data['paper']!r} is not a paper comparison "
+                              f"(valid: {', '.join(paper_names())})")
     exp = Experiment(name=name, description=description, path=where, base_dir=base_dir, scenes=scenes,
                      traces=traces, size=size, gpus=gpus, fidelity=fidelity,
                      schemes=_check_schemes(data.get("schemes"), where),

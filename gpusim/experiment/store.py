@@ -5,7 +5,7 @@ Layout of ``DIR``::
     results.parquet, results.csv   one row per run (axes, status, error, figures)
     stats.parquet                  every declared stat in long form
     resolved.toml                  the experiment as run (overlays and --set applied)
-    traces/<scene>-<sha>.npz/.png  each trace and its exact reference image
+    traces/<scene>-<sha>.npz       each trace, its exact reference (.reference.npy) and its image (.png)
     runs/<run>/                    config.toml, record.json, image.png (+ image-timed.png), outcome.json
 
 Every file is written atomically. ``runs/<run>/outcome.json`` is written last,
@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from gpusim.atomic_io import atomic_output, write_text_atomic
-from gpusim.experiment.execute import Outcome
+from gpusim.experiment.execute import Outcome, reference_path
 from gpusim.replay import jsonable
 
 #: the row's columns before the parameter, override and figure columns
@@ -100,17 +100,22 @@ class ResultsStore:
         return done
 
     def save_trace(self, trace, label: str, sha: str) -> Path:
-        """The trace (and its exact reference image) under traces/, once per content."""
+        """The trace, its exact reference composite (``.reference.npy``, float64) and the reference as a PNG
+        under traces/, each once per content; returns the trace's path. Tasks read the reference instead of
+        compositing it again."""
         from gpusim.trace_io import save_trace
         path = self.root / "traces" / f"{label}-{sha[:12]}.npz"
         if not path.is_file():
             save_trace(trace, path)
-        png = path.with_suffix(".png")
-        if not png.is_file():
+        ref_path, png = reference_path(path), path.with_suffix(".png")
+        if not (ref_path.is_file() and png.is_file()):
             from gpusim.experiment.execute import rgb8
             from gpusim.metrics import composite_exact
             from gpusim.report.images import save_rgb8_png
-            save_rgb8_png(rgb8(composite_exact(trace)), png)
+            reference = composite_exact(trace)
+            with atomic_output(ref_path) as handle:
+                np.save(handle, reference)
+            save_rgb8_png(rgb8(reference), png)
         return path
 
     def save_outcome(self, outcome: Outcome, config: dict) -> None:

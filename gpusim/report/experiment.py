@@ -19,7 +19,7 @@ import pandas as pd
 from gpusim.atomic_io import write_text_atomic
 from gpusim.errors import GpusimError
 from gpusim.report import figures
-from gpusim.report.tables import (best_level, fidelity_errors, fidelity_summary, markdown, one_per_functional,
+from gpusim.report.tables import (best_level, fidelity_errors, fidelity_summary, fmt, markdown, one_per_functional,
                                   structure_table, unit_utilisation, with_labels)
 
 IMAGES_PER_FIGURE = 11
@@ -76,6 +76,37 @@ class _Report:
         self.add(f"GPUs: {', '.join(dict.fromkeys(r['gpu']))}. Fidelity levels: {levels}. Cycles are shader-clock "
                  f"cycles of the modelled GPU; figures that compare schemes use the most faithful level run "
                  f"(**{self.level or 'none'}**) and say so.", "")
+
+    def paper(self) -> None:
+        """The "Paper vs gpusim" table (and the comparison's own sections) when the experiment names a paper."""
+        name = self.meta.get("paper")
+        if not name:
+            return
+        from gpusim.papers import PAPERS
+        if name not in PAPERS:
+            self.add(f"## Paper vs gpusim", "", f"No comparison named `{name}` in this gpusim.", "")
+            return
+        comparison = PAPERS[name].compare(self.results, self.stats)
+        self.add("## Paper vs gpusim", "", f"**{comparison.title}.** {comparison.summary}", "",
+                 "Each row: the paper's number, ours from this experiment's results, ours / paper (or whether "
+                 "a relation the paper states holds), and what differs. No number is fitted to the paper; [derived] marks a number computed from the paper's "
+                 "own data or formulas rather than printed in it.", "")
+        self.add("| source | quantity | paper | gpusim | ratio | note |", "|---|---|---|---|---|---|")
+        for r in comparison.rows:
+            ratio = r.verdict or ("-" if r.ratio != r.ratio else f"{r.ratio:.3f}")
+            self.add(f"| {r.source} | {r.quantity} | {fmt(r.paper, r.kind)} | {fmt(r.ours, r.kind)} | {ratio} | "
+                     f"{r.note} |")
+        self.add("")
+        for section in comparison.sections:
+            self.add(f"### {section.title}", "")
+            if section.text:
+                self.add(section.text, "")
+            if section.chart is not None and len(section.chart):
+                path = figures.grouped_bars(section.chart, section.chart_ylabel, section.title,
+                                            self.figdir / f"paper-{_slug(section.title)}.png", section.chart_log)
+                self.figure(path, section.title)
+            if section.table is not None and len(section.table):
+                self.add(markdown(section.table, section.table_kinds), "")
 
     def error_against_time(self) -> None:
         self.add("## Error against run time", "")
@@ -254,6 +285,7 @@ class _Report:
         for old in self.figdir.glob("*.png"):
             old.unlink()
         self.header()
+        self.paper()
         self.error_against_time()
         self.run_table()
         self.cycles()

@@ -183,3 +183,28 @@ def image_grid(reference: np.ndarray, images: list[tuple[str, np.ndarray]], titl
                      label=f"|image - reference| (8-bit steps, max channel, clipped at {max_steps})")
     fig.suptitle(title, fontsize=10)
     return save(fig, path)
+
+
+def grouped_bars(chart: pd.DataFrame, ylabel: str, title: str, path: Path, log: bool = False) -> Path:
+    """Bars of ``value`` per ``x``, one bar per ``group`` side by side (a paper figure's layout)."""
+    xs = list(dict.fromkeys(chart["x"]))
+    groups = list(dict.fromkeys(chart["group"]))
+    table = chart.pivot_table(index="x", columns="group", values="value", sort=False).reindex(index=xs,
+                                                                                              columns=groups)
+    fig = Figure(figsize=(max(7.0, 0.28 * len(xs) * len(groups) + 2), 4.4))
+    ax = fig.subplots()
+    width = 0.8 / len(groups)
+    colours = _colours(groups)
+    for i, group in enumerate(groups):
+        ax.bar(np.arange(len(xs)) + (i - (len(groups) - 1) / 2) * width, table[group].to_numpy(dtype=float),
+               width, label=group, color=colours[group], edgecolor="white", linewidth=0.3)
+    ax.set_xticks(range(len(xs)), xs, fontsize=8)
+    ax.set_ylabel(ylabel)
+    if log:
+        ax.set_yscale("log")
+    ax.grid(True, axis="y", alpha=0.25)
+    ax.legend(fontsize=7, ncol=min(6, len(groups)), loc="upper left")
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return save(fig, path)
+

@@ -176,7 +176,7 @@ def fmt(value, kind: str = "") -> str:
         if kind == "pct":
             return f"{100 * v:+.1f}%"
         if kind == "x":
-            return f"{v:.1f}x"
+            return f"{v:.2f}x"
         if v.is_integer() and abs(v) < 1e15:
             return f"{int(v):,}"
         return f"{v:.3g}" if abs(v) < 1e4 else f"{v:,.0f}"

@@ -1,0 +1,12 @@
+"""Comparisons with the source papers ("Paper vs gpusim"), one module per seed, chosen by an experiment's
+``paper`` key. Each module's ``compare(results, stats)`` returns a :class:`~gpusim.papers.base.Comparison`;
+gpusim.report draws it. Nothing here imports matplotlib."""
+
+from gpusim.papers import seed002, seed003
+
+#: name -> comparison module (``paper = "NAME"`` in an experiment file)
+PAPERS = {"seed-002": seed002, "seed-003": seed003}
+
+
+def paper_names() -> list[str]:
+    return sorted(PAPERS)

@@ -1,0 +1,72 @@
+"""The seed experiments at their CI size: each report opens with its "Paper vs gpusim" table."""
+
+from __future__ import annotations
+
+import re
+
+import pandas as pd
+import pytest
+
+from gpusim.experiment import load_experiment, run_experiment
+from gpusim.papers import PAPERS
+from gpusim.papers.base import PaperRow
+from gpusim.report.experiment import write_report
+
+
+def paper_table(index_text: str) -> list[list[str]]:
+    """The rows of the report's Paper vs gpusim table, as cells."""
+    part = index_text.split("## Paper vs gpusim", 1)[1]
+    lines = [line for line in part.splitlines() if line.startswith("| ") and not line.startswith("| source")]
+    rows = []
+    for line in lines:
+        if line.startswith("|---"):
+            continue
+        rows.append([c.strip() for c in line.strip("|").split(" | ")])
+        if not part.split(line, 1)[1].startswith("\n|"):
+            break
+    return rows
+
+
+@pytest.fixture(scope="module")
+def seed003(tmp_path_factory):
+    out = tmp_path_factory.mktemp("seed003")
+    summary = run_experiment(load_experiment("seed-003-ci"), out, workers=2, quiet=True)
+    assert summary.failed == 0
+    return out, write_report(out).read_text()
+
+
+def test_seed003_report_opens_with_the_paper_table(seed003):
+    _, text = seed003
+    headings = re.findall(r"^## .*$", text, flags=re.M)
+    assert headings[0] == "## Paper vs gpusim"
+    rows = paper_table(text)
+    by = {(r[0], r[1]): r for r in rows}
+    # Table 4-1 and section 4.3.2 are reproduced exactly on the frames run; the others say they were not run
+    for frame in (120, 480):
+        assert by[(f"Table 4-1, Frame{frame}", "fragments")][4] == "1.000"
+        assert by[(f"§4.3.2, Frame{frame}", "R-buffer execution time (cycles)")][4] == "1.000"
+        assert by[(f"§4.3.2, Frame{frame}", "Weight-Factor execution time (cycles)")][4] == "1.000"
+    assert by[("Table 4-1, Frame60", "fragments")][3] == "not run in this experiment"
+    assert by[("Fig. 4-3, Frame480", "TFSS(L_num=3) memory / R-buffer memory")][4] == "holds"
+    assert "### Sensitivity: what the thesis leaves unstated" in text
+
+
+def test_seed003_comparison_reads_the_results_only(seed003):
+    out, _ = seed003
+    results = pd.read_parquet(out / "results.parquet")
+    stats = pd.read_parquet(out / "stats.parquet")
+    rows = {(r.source, r.quantity): r for r in PAPERS["seed-003"].compare(results, stats).rows}
+    rb = results[(results["variant"] == "r-buffer") & (results["scene"] == "thesis-frame480")]
+    assert rows[("§4.3.2, Frame480", "R-buffer execution time (cycles)")].ours == float(rb["cycles"].iloc[0])
+    # the comparison follows the table: change our number and the row changes with it
+    changed = results.copy()
+    changed.loc[rb.index, "cycles"] = 1.0
+    again = {(r.source, r.quantity): r for r in PAPERS["seed-003"].compare(changed, stats).rows}
+    assert again[("§4.3.2, Frame480", "R-buffer execution time (cycles)")].ours == 1.0
+
+
+def test_paper_row_ratio_and_verdict():
+    assert PaperRow("s", "q", 2.0, 3.0).ratio == 1.5
+    assert PaperRow("s", "q", "> 1", 1.2).verdict == "holds"
+    assert PaperRow("s", "q", "< 1", 1.2).verdict == "does not hold"
+    assert PaperRow("s", "q", 2.0, "not modelled").ratio != PaperRow("s", "q", 2.0, "not modelled").ratio
