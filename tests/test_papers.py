@@ -70,3 +70,18 @@ def test_paper_row_ratio_and_verdict():
     assert PaperRow("s", "q", "> 1", 1.2).verdict == "holds"
     assert PaperRow("s", "q", "< 1", 1.2).verdict == "does not hold"
     assert PaperRow("s", "q", 2.0, "not modelled").ratio != PaperRow("s", "q", 2.0, "not modelled").ratio
+
+
+def test_seed002_ci_report(tmp_path):
+    summary = run_experiment(load_experiment("seed-002-ci"), tmp_path, workers=2, quiet=True)
+    assert summary.failed == 0
+    text = write_report(tmp_path).read_text()
+    assert re.findall(r"^## .*$", text, flags=re.M)[0] == "## Paper vs gpusim"
+    rows = {(r[0], r[1]): r for r in paper_table(text)}
+    assert rows[("§1 table", "MLAB, 2 layers: time / hardware alpha blending")][3] == "not modelled"
+    lucid = rows[("§1 table", "LucidRaster: time / hardware alpha blending, mean over scenes")]
+    assert lucid[3].endswith("x") and float(lucid[4]) > 0
+    results = pd.read_parquet(tmp_path / "results.parquet")
+    df3 = results[(results["variant"] == "lucidraster") & (results["depth_filter"] == 3)]["stat.invalid_share"]
+    df12 = results[(results["variant"] == "lucidraster") & (results["depth_filter"] == 12)]["stat.invalid_share"]
+    assert (df12.to_numpy() <= df3.to_numpy()).all()

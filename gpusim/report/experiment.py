@@ -23,6 +23,8 @@ from gpusim.report.tables import (best_level, fidelity_errors, fidelity_summary,
                                   structure_table, unit_utilisation, with_labels)
 
 IMAGES_PER_FIGURE = 11
+IMAGE_SCENES = 3            # scenes whose images the report draws (the rest stay under runs/)
+SETTING_FIGURES = 4         # settings (scene and machine) drawn per kind of figure; the tables cover them all
 
 
 def _slug(text: str) -> str:
@@ -34,6 +36,7 @@ class _Report:
         self.root, self.out = root, out
         self.figdir = out / "figures"
         self.lines: list[str] = []
+        self.counts: dict[str, int] = {}
         try:
             self.results = pd.read_parquet(root / "results.parquet")
             self.stats = pd.read_parquet(root / "stats.parquet")
@@ -45,6 +48,15 @@ class _Report:
         self.labelled = with_labels(self.results)
         self.ok = self.labelled[self.labelled["status"] == "ok"]
         self.level = best_level(self.results)
+
+    def drawn(self, kind: str) -> bool:
+        """Whether another figure of ``kind`` fits the report's budget (SETTING_FIGURES per kind); the first
+        one over it leaves a line saying so."""
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if self.counts[kind] == SETTING_FIGURES + 1:
+            self.add(f"(Figures of this kind for the first {SETTING_FIGURES} settings only; the tables cover every "
+                     "run.)", "")
+        return self.counts[kind] <= SETTING_FIGURES
 
     def add(self, *lines: str) -> None:
         self.lines.extend(lines)
@@ -115,6 +127,8 @@ class _Report:
         if timed.empty:
             self.add("No run has simulated cycles (the experiment ran `fidelity = [\"none\"]` only).", "")
         for setting, points in timed.groupby("setting", sort=False):
+            if not self.drawn("error-vs-cycles"):
+                continue
             path = figures.error_vs_cycles(points, self.level,
                                            f"{setting}: image error against cycles ({self.level} level)",
                                            self.figdir / f"error-vs-cycles-{_slug(setting)}.png")
@@ -169,9 +183,10 @@ class _Report:
         self.add("## Footprint by structure", "", "Bytes each structure allocates up front (as its paper sizes "
                  "it), per scene and scheme configuration (the GPU and level do not change them).", "")
         for scene, table in self._per_scene(runs, "footprint_bytes"):
-            path = figures.stacked_bars(table, "footprint (MiB)", f"{scene}: footprint by structure",
-                                        self.figdir / f"footprint-{_slug(scene)}.png", scale=2**20)
-            self.figure(path, f"footprint by structure, {scene}")
+            if self.drawn("footprint"):
+                path = figures.stacked_bars(table, "footprint (MiB)", f"{scene}: footprint by structure",
+                                            self.figdir / f"footprint-{_slug(scene)}.png", scale=2**20)
+                self.figure(path, f"footprint by structure, {scene}")
             table["total"] = table.sum(axis=1)
             self.add(markdown(table, {c: "bytes" for c in table.columns}, index=True), "")
         self.add("## Accesses by structure and operation", "", "Memory operations over all passes, per scene and "
@@ -192,11 +207,12 @@ class _Report:
         self.add("Cycles of every configuration at every level run:", "", markdown(pivot, index=True), "")
         best = timed[timed["fidelity"] == self.level]
         for setting, rows in best.groupby("setting", sort=False):
-            util = unit_utilisation(self.stats, rows)
-            path = figures.cycles_and_units(rows.set_index("config")["cycles"], util, self.level,
-                                            f"{setting}: cycles and unit utilisation ({self.level} level)",
-                                            self.figdir / f"cycles-{_slug(setting)}.png")
-            self.figure(path, f"cycles per scheme, {setting}")
+            if self.drawn("cycles"):
+                util = unit_utilisation(self.stats, rows)
+                path = figures.cycles_and_units(rows.set_index("config")["cycles"], util, self.level,
+                                                f"{setting}: cycles and unit utilisation ({self.level} level)",
+                                                self.figdir / f"cycles-{_slug(setting)}.png")
+                self.figure(path, f"cycles per scheme, {setting}")
             passes = self.stats[self.stats["run"].isin(rows["run"]) & (self.stats["stat"] == "pass_cycles")]
             if len(passes):
                 label = rows.set_index("run")["config"]
@@ -244,6 +260,15 @@ class _Report:
         if not (self.root / "runs").is_dir():
             self.add("The run images are not here (`runs/` was not kept); rerun the experiment to draw them.", "")
             return
+        scenes = list(dict.fromkeys(runs["scene"]))
+        per_scene = runs.groupby("scene").size().max() if len(runs) else 0
+        if per_scene > 2 * IMAGES_PER_FIGURE or len(scenes) > IMAGE_SCENES:
+            self.add(f"Images of the first {min(len(scenes), IMAGE_SCENES)} scenes"
+                     + (", one per scheme table (its first parameter set)" if per_scene > 2 * IMAGES_PER_FIGURE
+                        else "") + "; every run's image is under `runs/<run>/image.png`.", "")
+            runs = runs[runs["scene"].isin(scenes[:IMAGE_SCENES])]
+            if per_scene > 2 * IMAGES_PER_FIGURE:
+                runs = runs.drop_duplicates(["scene", "variant"])
         for scene, rows in runs.groupby("scene", sort=False):
             ref_path = self.root / Path(str(rows["trace"].iloc[0])).with_suffix(".png")
             if not ref_path.is_file():
