@@ -121,15 +121,25 @@ def test_config_command_prints_runs_and_count(tmp_path, capsys):
                                                                        "analytic"),
     ('scenes = ["nowhere"]\n[schemes.kbuffer]\n', "unknown scene 'nowhere' (built-in scenes:"),
     ('traces = ["missing.npz"]\n[schemes.kbuffer]\n', "traces: missing.npz: no such file"),
-    ('scenes = ["default"]\nsize = "big"\n[schemes.kbuffer]\n', "size: expected WIDTHxHEIGHT"),
+    ('scenes = ["default"]\nsize = "big"\n[schemes.kbuffer]\n', "size: 'big' is not WIDTHxHEIGHT"),
     ('scenes = ["default"]\n', "schemes: name at least one scheme"),
     ('scenes = ["default"]\ninclude = "nope.toml"\n[schemes.kbuffer]\n', "include: nope.toml: no such file"),
     ('scenes = ["default"]\n[schemes.kbuffer]\nk = [4, 4]\n', "schemes.kbuffer.k: lists 4 twice"),
     ('scenes = ["default"]\n[scene-set]\n"camera.fov" = 40\n[schemes.kbuffer]\n', "camera.fov: unknown key"),
     ('scenes = ["default"\n', "invalid TOML"),
+    ('scenes = ["default", "../configs/scenes/default.toml"]\n[schemes.kbuffer]\n',
+     "would both be the scene 'default' in the results"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\n[gpu-set]\n"runner.workers" = [1, 2]\n',
+     "gpu-set.runner.workers: the number of processes changes no figure"),
+    ('scenes = ["default"]\n[schemes.kbuffer]\nscheme = "tfss"\n', "schemes.kbuffer: the label names the scheme"),
+    (b'scenes = ["d\xe9fault"]\n', "not UTF-8 text"),
 ])
 def test_bad_experiment_fails_before_running_with_one_line(tmp_path, capsys, text, message):
-    path = write(tmp_path / "bad.toml", text)
+    (tmp_path / "configs").mkdir()
+    path = tmp_path / "configs" / "bad.toml"
+    path.write_bytes(text) if isinstance(text, bytes) else path.write_text(text)
+    (tmp_path / "configs" / "scenes").mkdir()
+    shutil.copy(ROOT / "configs" / "scenes" / "default.toml", tmp_path / "configs" / "scenes")
     out = tmp_path / "out"
     assert main(["run", str(path), "-o", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err
@@ -143,6 +153,8 @@ def test_bad_experiment_fails_before_running_with_one_line(tmp_path, capsys, tex
     (["--set", "schemes.kbuffer.k=[0]"], "k: must be >= 1"),
     (["--workers", "0"], "--workers 0: give at least 1"),
     (["--cluster", "tcp://127.0.0.1:9", "--workers", "2"], "exclude each other"),
+    (["--cluster", "tcp://127.0.0.1:9"], "cannot reach a dask scheduler"),
+    (["--set", "include=other.toml"], "include is read from the file before --set applies"),
 ])
 def test_bad_command_line_is_one_line(tmp_path, capsys, args, message):
     path = write(tmp_path / "e.toml", SMALL)
@@ -152,11 +164,22 @@ def test_bad_command_line_is_one_line(tmp_path, capsys, args, message):
     assert not (tmp_path / "out").exists()
 
 
-def test_unreachable_cluster_is_one_line(tmp_path, capsys):
+def test_an_output_path_that_cannot_hold_results_is_one_line(tmp_path, capsys):
     path = write(tmp_path / "e.toml", SMALL.replace('["none", "analytic", "full", "thesis"]', '["none"]'))
-    assert main(["run", str(path), "-o", str(tmp_path / "out"), "--quiet", "--cluster", "tcp://127.0.0.1:9"]) == 2
-    err = capsys.readouterr().err
-    assert "cannot reach a dask scheduler" in err and len(err.strip().splitlines()) == 1
+    (tmp_path / "afile").write_text("x")
+    for out in (tmp_path / "afile", tmp_path / "afile" / "below"):
+        assert main(["run", str(path), "-o", str(out), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("gpusim: error: ") and len(err.strip().splitlines()) == 1, err
+        assert "Traceback" not in err
+    assert (tmp_path / "afile").read_text() == "x"
+
+
+def test_a_scene_with_no_fragments_runs(tmp_path):
+    path = write(tmp_path / "e.toml", 'scenes = ["default"]\nsize = "16x16"\nfidelity = ["none", "full"]\n'
+                                      '[scene-set]\n"camera.target" = [[0.0, 0.6, 100.0]]\n[schemes.alpha-blend]\n')
+    summary = run_experiment(load_experiment(str(path)), tmp_path / "out", workers=1, quiet=True)
+    assert summary.failed == 0 and (table(tmp_path / "out")["fragments"] == 0).all()
 
 
 # ------------------------------------------------------------------------------------------- running a sweep
@@ -314,7 +337,8 @@ def test_a_killed_sweep_resumes_to_the_same_table(tmp_path, sig):
     total = len(expand(load_experiment(str(path))))
     assert 3 <= done < total - 4
     if (out / "results.parquet").exists():                          # never corrupt: it reads
-        pd.read_parquet(out / "results.parquet")
+        partial = pd.read_parquet(out / "results.parquet")
+        assert set(partial["status"]) <= {"ok", "pending", "skipped"} and "pending" in set(partial["status"])
     resumed = run_experiment(load_experiment(str(path)), out, workers=2, quiet=True)
     assert resumed.reused >= done - 2 and resumed.failed == 0       # at most the runs in flight are lost
     reference = run_experiment(load_experiment(str(path)), tmp_path / "ref", workers=1, quiet=True)
@@ -409,3 +433,13 @@ def test_a_malformed_trace_fails_in_one_line_before_any_output(tmp_path, capsys)
     err = capsys.readouterr().err
     assert "bad.npz" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_report_of_a_functional_only_sweep(tmp_path):
+    from gpusim.report.experiment import write_report
+    path = write(tmp_path / "e.toml", 'scenes = ["default"]\nsize = "24x20"\nfidelity = ["none"]\n'
+                                      '[schemes.lucidraster]\ndepth_filter = [1, 3]\n')
+    run_experiment(load_experiment(str(path)), tmp_path / "out", workers=1, quiet=True)
+    text = write_report(tmp_path / "out").read_text()
+    assert "No run has simulated cycles" in text and "No timed run." in text
+    assert "## Scheme statistics" in text and "invalid_pixels" in text

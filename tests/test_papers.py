@@ -85,3 +85,25 @@ def test_seed002_ci_report(tmp_path):
     df3 = results[(results["variant"] == "lucidraster") & (results["depth_filter"] == 3)]["stat.invalid_share"]
     df12 = results[(results["variant"] == "lucidraster") & (results["depth_filter"] == 12)]["stat.invalid_share"]
     assert (df12.to_numpy() <= df3.to_numpy()).all()
+
+
+@pytest.mark.parametrize("name, first_row", [
+    ("seed-000-ci", ("000 Table 3, Dragon", "MDTS frame rate (fps)")),
+    ("seed-004-ci", ("Table 1, Dragon (871k)", "4 RGBZ: MP frame rate (fps)")),
+])
+def test_seed_ci_reports_open_with_the_paper_table(tmp_path, name, first_row):
+    summary = run_experiment(load_experiment(name), tmp_path, workers=2, quiet=True)
+    assert summary.failed == 0
+    text = write_report(tmp_path).read_text()
+    assert re.findall(r"^## .*$", text, flags=re.M)[0] == "## Paper vs gpusim"
+    rows = paper_table(text)
+    assert (rows[0][0], rows[0][1]) == first_row
+    measured = [r for r in rows if r[3] not in ("not modelled", "not run in this experiment")]
+    assert measured and all(r[4] != "-" for r in measured)       # every measured row has a ratio or verdict
+    assert any(r[3] == "not modelled" for r in rows)              # methods gpusim lacks stay in the table
+
+
+def test_every_paper_has_an_experiment_and_a_ci_overlay():
+    for name in PAPERS:
+        full, ci = load_experiment(name), load_experiment(f"{name}-ci")
+        assert full.data["paper"] == ci.data["paper"] == name

@@ -41,6 +41,11 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
+    except OSError as exc:             # a path that is a file, not a folder; no permission; a full disk
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"gpusim: error: {where}{exc.strerror or exc}; check the path, its permissions and the free space",
+              file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

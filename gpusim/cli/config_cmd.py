@@ -19,7 +19,7 @@ def run(args) -> int:
     exp = load_experiment(args.file, args.set)
     if args.toml:
         from gpusim.experiment.store import toml_text
-        print(toml_text(exp.data, f"# {exp.path}, resolved\n"), end="")
+        print(toml_text(exp.resolved_data(), f"# {exp.path}, resolved\n"), end="")
         return 0
     runs = expand(exp)
     given = {e.label: list(e.axes) for e in exp.schemes}

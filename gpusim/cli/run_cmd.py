@@ -43,17 +43,18 @@ def run(args) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         summary = run_experiment(exp, out, args.workers, args.cluster, args.quiet)
+        if not args.no_report:
+            from gpusim.report.experiment import write_report
+            index = write_report(out)
+            if not args.quiet:
+                print(f"report: {index}", file=sys.stderr)
     except KeyboardInterrupt:
-        print(f"gpusim: interrupted; finished runs are kept in {out}: run the same command again to resume",
-              file=sys.stderr)
+        kept = (f"finished runs are kept in {out}: run the same command again to resume"
+                if (out / "runs").is_dir() else "nothing was written")
+        print(f"gpusim: interrupted; {kept}", file=sys.stderr)
         return 130
     finally:
         signal.signal(signal.SIGTERM, previous)
-    if not args.no_report:
-        from gpusim.report.experiment import write_report
-        index = write_report(out)
-        if not args.quiet:
-            print(f"report: {index}", file=sys.stderr)
     lines = describe_summary(summary)
     for line in lines[:-1]:
         print(line, file=sys.stderr if args.quiet else sys.stdout)

@@ -62,7 +62,13 @@ class LocalExecutor:
                                         initializer=_worker_init, initargs=(os.getpid(),))
 
     def run(self, tasks: list[Task]) -> Iterator[tuple[Task, list[Outcome]]]:
-        pending = {self.pool.submit(_execute_path, task): task for task in tasks}
+        # workers start during the submissions: they inherit an ignored SIGINT, so a Ctrl-C while they start
+        # up stops the sweep here (which stops them) instead of printing their tracebacks
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            pending = {self.pool.submit(_execute_path, task): task for task in tasks}
+        finally:
+            signal.signal(signal.SIGINT, previous)
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
@@ -82,7 +88,7 @@ class LocalExecutor:
             child.join(timeout=5)
 
 
-def _probe(address: str) -> None:
+def probe(address: str) -> None:
     """Fail at once, in one line, when nothing listens at a tcp:// scheduler address (dask would retry
     until its timeout)."""
     if not address.startswith("tcp://"):
@@ -104,7 +110,7 @@ class DaskExecutor:
             from distributed import Client
         except ImportError:                                      # pragma: no cover - a declared dependency
             raise GpusimError("--cluster needs dask.distributed: pip install 'distributed'") from None
-        _probe(address)
+        probe(address)
         try:
             self.client = Client(address, timeout="15s")
         except (OSError, TimeoutError, ValueError) as exc:

@@ -92,7 +92,7 @@ def scene_overrides(exp, combo: tuple[tuple[str, Any], ...]) -> list[str]:
 
 
 def sources(exp) -> list[Source]:
-    out = []
+    out: list[Source] = []
     for scene in exp.scenes:
         spec = str(exp.resolve_path(scene)) if Path(scene).suffix else scene
         for combo in set_combinations(exp.scene_set):
@@ -100,6 +100,12 @@ def sources(exp) -> list[Source]:
                               tuple(scene_overrides(exp, combo)), combo))
     for trace in exp.traces:
         out.append(Source(Path(trace).stem, "trace", str(exp.resolve_path(trace))))
+    named: dict[tuple, Source] = {}
+    for source in out:
+        other = named.setdefault((source.label, source.scene_set), source)
+        if other.spec != source.spec or other.kind != source.kind:
+            raise ConfigError(f"{exp.path}: scenes: '{other.spec}' and '{source.spec}' would both be the scene "
+                              f"'{source.label}' in the results; list one, or rename a file")
     return out
 
 

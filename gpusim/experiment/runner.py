@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from gpusim.experiment.execute import Outcome, Task, TaskRun, reference_path
-from gpusim.experiment.executors import make_executor
+from gpusim.experiment.executors import make_executor, probe
 from gpusim.experiment.grid import GPU_LEVELS, RunSpec, expand, resolved_run, run_id
 from gpusim.experiment.spec import Experiment
 from gpusim.experiment.store import FIGURE_COLUMNS, LEAD_COLUMNS, ResultsStore
@@ -47,7 +47,9 @@ def trace_sha256(trace) -> str:
     h = hashlib.sha256()
     h.update(f"{trace.width}x{trace.height};{list(trace.background)}".encode())
     for name in ("x", "y", "z", "rgba", "prim", "opaque"):
-        h.update(memoryview(getattr(trace, name)).cast("B"))
+        array = np.ascontiguousarray(getattr(trace, name))
+        if array.size:
+            h.update(memoryview(array).cast("B"))
     return h.hexdigest()
 
 
@@ -75,17 +77,20 @@ def describe_run(run: RunSpec) -> str:
 
 
 def _row(run: RunSpec, rid: str, outcome: Outcome | None, trace_info: dict) -> dict:
+    """A run's row: ``skipped`` (with the reason) for a combination its scheme cannot run, ``pending`` for a
+    run this sweep has not finished (yet: an interrupted sweep's table), else its outcome."""
     reserved = set(LEAD_COLUMNS) | set(FIGURE_COLUMNS)
-    row = {"run": rid, "status": outcome.status if outcome else "skipped",
-           "error": outcome.error if outcome else run.skip, "index": run.index, "scene": run.source.label,
+    status = "skipped" if run.skip else outcome.status if outcome else "pending"
+    row = {"run": rid, "status": status, "error": run.skip or (outcome.error if outcome else ""),
+           "index": run.index, "scene": run.source.label,
            "width": trace_info["width"], "height": trace_info["height"], "trace": trace_info["path"],
            "gpu": run.gpu, "fidelity": run.fidelity, "scheme": run.scheme, "variant": run.label}
-    for k, v in run.source.scene_set:
-        row[f"scene.{k}"] = v
-    for k, v in run.gpu_set:
-        row[k] = v
     for k, v in run.params.items():
         row[f"param.{k}" if k in reserved else k] = v
+    for k, v in run.gpu_set:
+        row[k] = v
+    for k, v in run.source.scene_set:
+        row[f"scene.{k}"] = v
     if outcome is not None:
         row |= outcome.figures
     return row
@@ -96,14 +101,17 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
     """Run every grid point of ``exp`` into ``out`` (resuming what an earlier sweep there finished)."""
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     runs = expand(exp)
+    if cluster:
+        probe(cluster)                     # an unreachable cluster fails before anything is written
     store = ResultsStore(out)
-    store.remove_stale_temporaries()
     summary = Summary(Path(out), runs=len(runs))
 
     built = {}                                 # every trace first: a bad one fails before anything is written
     for source in dict.fromkeys(r.source for r in runs):
         trace = build_trace(source)
         built[source] = (trace, trace_sha256(trace))
+    store.prepare()
+    store.remove_stale_temporaries()
     traces, infos = {}, {}
     for source, (trace, sha) in built.items():
         path = store.save_trace(trace, source.label, sha)
@@ -155,7 +163,7 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
             rows.append(_row(r, i, o, infos[r.source] | {"path": infos[r.source]["rel"]}))
             if o is not None:
                 stats += [{"run": i} | s for s in o.stats]
-        store.write_tables(rows, stats, exp.data)
+        store.write_tables(rows, stats, exp.resolved_data())
 
     from tqdm import tqdm
     bar = tqdm(total=todo, unit="run", disable=True if quiet else None, file=sys.stderr, dynamic_ncols=True,

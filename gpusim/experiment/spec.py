@@ -88,6 +88,17 @@ class Experiment:
     scene_set: dict[str, list[Any]] = field(default_factory=dict)
     data: dict = field(default_factory=dict)     # the resolved tree (overlays and --set applied)
 
+    def resolved_data(self) -> dict:
+        """The experiment tree as run, with file paths made absolute, so it can be run from anywhere."""
+        data = copy.deepcopy(self.data)
+        data.pop("include", None)
+        for key in ("scenes", "traces", "gpus"):
+            if key in data:
+                values = [data[key]] if isinstance(data[key], str) else data[key]
+                data[key] = [str(self.resolve_path(v).resolve()) if (Path(v).suffix and self.resolve_path(v).exists())
+                             else v for v in values]
+        return data
+
     def resolve_path(self, text: str) -> Path:
         """A path from the file: relative to the experiment's folder if it exists there, else as given."""
         path = Path(text)
@@ -148,6 +159,11 @@ def apply_experiment_overrides(data: dict, overrides: list[str]) -> dict:
     plain = []
     for text in overrides:
         parts, value = parse_override(text)
+        if parts[0] == "include":
+            raise ConfigError(f"--set {text}: include is read from the file before --set applies; write it in "
+                              "the file, or give the other file as FILE")
+        if parts == ["size"] and not isinstance(value, str):      # 0x10 reads as a TOML hex number
+            value = text.split("=", 1)[1].strip()
         if parts[0] in ("gpu-set", "scene-set") and len(parts) > 1:
             data.setdefault(parts[0], {})
             if not isinstance(data[parts[0]], dict):
@@ -186,8 +202,9 @@ def _parse_size(text: Any, where: str) -> tuple[int, int]:
         raise ConfigError(f"{where}: size: expected \"WIDTHxHEIGHT\" in pixels, e.g. size = \"320x240\"")
     try:
         return parse_size(text)
-    except GpusimError as exc:
-        raise ConfigError(f"{where}: size: {str(exc).split(': ', 1)[1]}") from None
+    except GpusimError:
+        raise ConfigError(f"{where}: size: {text!r} is not WIDTHxHEIGHT with sides of 1..16384 pixels, "
+                          "e.g. size = \"320x240\"") from None
 
 
 def _check_schemes(table: Any, where: str) -> list[SchemeEntry]:
@@ -204,6 +221,9 @@ def _check_schemes(table: Any, where: str) -> list[SchemeEntry]:
             hint = "" if "scheme" in table[label] else "; or name one with scheme = \"...\" inside the table"
             raise ConfigError(f"{where}: schemes.{label}: unknown scheme '{name}' "
                               f"(valid: {', '.join(scheme_names())}){hint}")
+        if label != name and label in scheme_names():
+            raise ConfigError(f"{where}: schemes.{label}: the label names the scheme {label} but scheme = \"{name}\"; "
+                              f"use another label (e.g. [schemes.{name}-{label}])")
         if not _NAME.match(label):
             raise ConfigError(f"{where}: schemes.{label}: a label holds letters, digits, '.', '_' and '-' only")
         valid = [f.name for f in dataclasses.fields(scheme_class(name))]
@@ -226,6 +246,9 @@ def _check_sets(data: dict, key: str, where: str) -> dict[str, list[Any]]:
             raise ConfigError(f"{where}: {key}.{k}: give dotted keys as one quoted key, "
                               f"e.g. \"{k}.{next(iter(v), 'key')}\" = ...")
         out[k] = _axis(v, f"{key}.{k}", where)
+        if key == "gpu-set" and k == "runner.workers" and len(out[k]) > 1:
+            raise ConfigError(f"{where}: gpu-set.runner.workers: the number of processes changes no figure, so "
+                              "its values would give identical runs; give one value")
     return out
 
 

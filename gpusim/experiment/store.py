@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -24,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from gpusim.atomic_io import atomic_output, write_text_atomic
+from gpusim.errors import GpusimError
 from gpusim.experiment.execute import Outcome, reference_path
 from gpusim.replay import jsonable
 
@@ -74,6 +76,18 @@ class ResultsStore:
 
     def run_dir(self, run_id: str) -> Path:
         return self.root / "runs" / run_id
+
+    def prepare(self) -> None:
+        """Create the directory; one line naming the problem when it cannot hold the results."""
+        if self.root.exists() and not self.root.is_dir():
+            raise GpusimError(f"-o {self.root}: is a file, not a directory; choose a directory for the results")
+        try:
+            (self.root / "runs").mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise GpusimError(f"-o {self.root}: cannot create it ({exc.strerror}); choose a directory you can "
+                              "write") from None
+        if not os.access(self.root, os.W_OK | os.X_OK):
+            raise GpusimError(f"-o {self.root}: not writable; choose a directory you can write")
 
     def remove_stale_temporaries(self) -> int:
         """Temporary files an interrupted sweep left behind (never the targets: those are complete)."""
@@ -170,6 +184,8 @@ def results_frame(rows: list[dict]) -> pd.DataFrame:
 def _uniform(column: pd.Series) -> pd.Series:
     """A column Parquet can hold: numbers stay numbers; mixed kinds become text (missing stays missing)."""
     kinds = {type(v) for v in column if v is not None and not (isinstance(v, float) and math.isnan(v))}
+    if kinds and kinds <= {int, np.int64}:
+        return pd.to_numeric(column, errors="coerce").astype("Int64")     # integers stay integers beside NaN
     if not kinds or kinds <= {int, float, np.int64, np.float64}:
         return pd.to_numeric(column, errors="coerce") if kinds else column.astype("float64")
     if kinds <= {bool, np.bool_}:

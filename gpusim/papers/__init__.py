@@ -2,10 +2,10 @@
 ``paper`` key. Each module's ``compare(results, stats)`` returns a :class:`~gpusim.papers.base.Comparison`;
 gpusim.report draws it. Nothing here imports matplotlib."""
 
-from gpusim.papers import seed002, seed003
+from gpusim.papers import seed000, seed002, seed003, seed004
 
 #: name -> comparison module (``paper = "NAME"`` in an experiment file)
-PAPERS = {"seed-002": seed002, "seed-003": seed003}
+PAPERS = {"seed-000": seed000, "seed-002": seed002, "seed-003": seed003, "seed-004": seed004}
 
 
 def paper_names() -> list[str]:

@@ -238,38 +238,39 @@ def _sections(results: pd.DataFrame, frames: list[int]) -> list[Section]:
             text += (" Under every choice the lowest reduction against R-buffer is negative: on some frame and "
                      "L_num TFSS needs more memory than R-buffer (Figure 4-3 reports it for frame480 at L_num = 3).")
         sections.append(Section("Sensitivity: what the thesis leaves unstated", text, sens, shares))
-    mem = []
-    for f in frames:
-        for label, get in (("R-buffer", lambda f=f: rbuf(results, f)),
-                           *[(f"WF({d})", lambda f=f, d=d: wf(results, f, d)) for d in LNUMS],
-                           *[(f"TFSS({lnum})", lambda f=f, lnum=lnum: tfss(results, f, lnum)) for lnum in LNUMS],
-                           *[(f"TFSS+LZE({lnum})", lambda f=f, lnum=lnum: lze_best(results, f, lnum))
-                             for lnum in LNUMS]):
-            try:
-                mem.append({"x": f"frame{f}", "group": label, "value": get() / 2**20})
-            except Missing:
-                continue
+    mem = _chart(frames, [("R-buffer", lambda f: rbuf(results, f) / 2**20),
+                          *[(f"WF({d})", lambda f, d=d: wf(results, f, d) / 2**20) for d in LNUMS],
+                          *[(f"TFSS({n})", lambda f, n=n: tfss(results, f, n) / 2**20) for n in LNUMS],
+                          *[(f"TFSS+LZE({n})", lambda f, n=n: lze_best(results, f, n) / 2**20) for n in LNUMS]])
     if mem:
         sections.append(Section("Figures 4-3 and 4-5: memory per frame",
                                 "Table 4-2's totals per frame (S_A = 4 B, S_f = 16 B, Z = 4 B); TFSS+LZE is the "
                                 "smallest section size run for its L_num that drops no fragment.", chart=pd.DataFrame(mem),
                                 chart_ylabel="memory (MiB)"))
-    time = []
-    for f in frames:
-        for label, variant, params in (("R-buffer", "r-buffer", {"fragment_bytes": 16, "depth_bytes": 4}),
-                                       ("WF(2)", "weight-factor", {"d_avg": 2, "address_bytes": 4}),
-                                       ("TFSS(2)", "tfss", {"l_num": 2, "address_bytes": 4})):
-            try:
-                time.append({"x": f"frame{f}", "group": label,
-                             "value": one(results, "cycles", scene=frame_scene(f), variant=variant, **params)})
-            except Missing:
-                continue
+    time = _chart(frames, [(label, lambda f, v=variant, p=params: one(results, "cycles", scene=frame_scene(f),
+                                                                      variant=v, **p))
+                           for label, variant, params in (
+                               ("R-buffer", "r-buffer", {"fragment_bytes": 16, "depth_bytes": 4}),
+                               ("WF(2)", "weight-factor", {"d_avg": 2, "address_bytes": 4}),
+                               ("TFSS(2)", "tfss", {"l_num": 2, "address_bytes": 4}))])
     if time:
         sections.append(Section("Figure 4-7: execution time per frame",
                                 "Section 4.3.2's model (`fidelity = thesis`): one cycle per counted memory access "
                                 "plus the per-pixel compute of [Amor06].", chart=pd.DataFrame(time),
                                 chart_ylabel="cycles (thesis model)"))
     return sections
+
+
+def _chart(frames: list[int], series) -> list[dict]:
+    """Long-form chart rows (x = frame, group = series label) for the (label, value of a frame) series."""
+    rows = []
+    for f in frames:
+        for label, value in series:
+            try:
+                rows.append({"x": f"frame{f}", "group": label, "value": value(f)})
+            except Missing:
+                continue
+    return rows
 
 
 def _summary(results: pd.DataFrame, frames: list[int]) -> str:

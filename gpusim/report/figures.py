@@ -156,10 +156,11 @@ def cycles_and_units(cycles: pd.Series, utilisation: pd.DataFrame, level: str, t
     return save(fig, path)
 
 
-def image_grid(reference: np.ndarray, images: list[tuple[str, np.ndarray]], title: str, path: Path,
+def image_grid(reference: np.ndarray, images: list[tuple[str, np.ndarray, float]], title: str, path: Path,
                max_steps: int = 32) -> Path:
     """The exact reference, then each image above its difference map (largest channel difference from the
-    reference in 8-bit steps, clipped at ``max_steps``). Images are 8-bit rows, top row first."""
+    reference in 8-bit steps, clipped at ``max_steps``), titled with its differing pixels as the results table
+    counts them (from the float images). Images are 8-bit rows, top row first."""
     cols = min(6, len(images) + 1)
     pairs = -(-(len(images) + 1) // cols)
     cell = 1.9 * reference.shape[0] / reference.shape[1] + 0.3       # inches: the image and its title
@@ -167,9 +168,9 @@ def image_grid(reference: np.ndarray, images: list[tuple[str, np.ndarray]], titl
     axes = np.atleast_2d(fig.subplots(2 * pairs, cols))
     for ax in axes.flat:
         ax.set_axis_off()
-    entries = [("exact reference", reference)] + images
+    entries = [("exact reference", reference, 0)] + images
     im = None
-    for n, (name, image) in enumerate(entries):
+    for n, (name, image, differing) in enumerate(entries):
         r, c = divmod(n, cols)
         axes[2 * r, c].imshow(image, interpolation="nearest")
         axes[2 * r, c].set_title(name, fontsize=7)
@@ -177,7 +178,7 @@ def image_grid(reference: np.ndarray, images: list[tuple[str, np.ndarray]], titl
             diff = np.abs(image.astype(np.int16) - reference.astype(np.int16)).max(axis=2)
             im = axes[2 * r + 1, c].imshow(np.minimum(diff, max_steps), cmap="inferno", vmin=0, vmax=max_steps,
                                            interpolation="nearest")
-            axes[2 * r + 1, c].set_title(f"{int((diff > 1).sum()):,} px off > 1 step", fontsize=6)
+            axes[2 * r + 1, c].set_title(f"{differing:,.0f} px differ", fontsize=6)
     if im is not None:
         fig.colorbar(im, ax=list(axes[1::2].flat), fraction=0.02,
                      label=f"|image - reference| (8-bit steps, max channel, clipped at {max_steps})")

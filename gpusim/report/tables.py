@@ -61,6 +61,8 @@ def with_labels(results: pd.DataFrame) -> pd.DataFrame:
     vary_scene = _varying(out, scene_set)
     out["setting"] = [" ".join([row["scene"], *[f"{c.removeprefix('scene.')}={_value(row[c])}" for c in vary_scene],
                                 row["machine"]]) for _, row in out.iterrows()]
+    out["scene_label"] = [" ".join([row["scene"], *[f"{c.removeprefix('scene.')}={_value(row[c])}"
+                                                     for c in vary_scene]]) for _, row in out.iterrows()]
     out["functional"] = [" ".join([row["scene"], *[f"{c.removeprefix('scene.')}={_value(row[c])}"
                                                     for c in vary_scene], row["config"]])
                          for _, row in out.iterrows()]
@@ -179,14 +181,14 @@ def fmt(value, kind: str = "") -> str:
             return f"{v:.2f}x"
         if v.is_integer() and abs(v) < 1e15:
             return f"{int(v):,}"
-        return f"{v:.3g}" if abs(v) < 1e4 else f"{v:,.0f}"
+        return f"{v:.3g}" if abs(v) < 100 else f"{v:,.0f}"
     return str(value)
 
 
 def markdown(frame: pd.DataFrame, kinds: dict[str, str] | None = None, index: bool = False) -> str:
     """A GitHub markdown table of ``frame`` (cells formatted with :func:`fmt`)."""
     kinds = kinds or {}
-    data = frame.reset_index() if index else frame
+    data = frame.reset_index().rename(columns={"index": "", "functional": "configuration"}) if index else frame
     head = [str(c) for c in data.columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, row in data.iterrows():
