@@ -168,6 +168,12 @@ class ResultsStore:
 def results_frame(rows: list[dict]) -> pd.DataFrame:
     """The results table in its column order: lead columns, axes, figures, scheme stats."""
     frame = pd.DataFrame(rows)
+    for c in frame.columns:                  # whole numbers stay whole (pandas makes them float beside NaN)
+        raw = [row.get(c) for row in rows]
+        present = [v for v in raw if v is not None and not (isinstance(v, float) and math.isnan(v))]
+        if present and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in present):
+            frame[c] = pd.array([None if v is None or (isinstance(v, float) and math.isnan(v)) else int(v)
+                                 for v in raw], dtype="Int64")
     lead = [c for c in LEAD_COLUMNS if c in frame]
     figures = list(FIGURE_COLUMNS)
     stats = sorted(c for c in frame if c.startswith("stat."))
@@ -183,9 +189,9 @@ def results_frame(rows: list[dict]) -> pd.DataFrame:
 
 def _uniform(column: pd.Series) -> pd.Series:
     """A column Parquet can hold: numbers stay numbers; mixed kinds become text (missing stays missing)."""
+    if isinstance(column.dtype, pd.Int64Dtype):
+        return column
     kinds = {type(v) for v in column if v is not None and not (isinstance(v, float) and math.isnan(v))}
-    if kinds and kinds <= {int, np.int64}:
-        return pd.to_numeric(column, errors="coerce").astype("Int64")     # integers stay integers beside NaN
     if not kinds or kinds <= {int, float, np.int64, np.float64}:
         return pd.to_numeric(column, errors="coerce") if kinds else column.astype("float64")
     if kinds <= {bool, np.bool_}:

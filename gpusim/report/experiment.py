@@ -39,6 +39,8 @@ class _Report:
         self.counts: dict[str, int] = {}
         try:
             self.results = pd.read_parquet(root / "results.parquet")
+            whole = [c for c in self.results if isinstance(self.results[c].dtype, pd.Int64Dtype)]
+            self.results = self.results.astype({c: "float64" for c in whole})   # NaN, not pd.NA, where missing
             self.stats = pd.read_parquet(root / "stats.parquet")
         except (OSError, ValueError) as exc:
             raise GpusimError(f"{root}: cannot read the results tables ({exc}); rerun gpusim run into it") from None
