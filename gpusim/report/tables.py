@@ -174,7 +174,7 @@ def fmt(value, kind: str = "") -> str:
         if kind == "bytes":
             return f"{v / 2**20:,.2f} MiB" if v >= 2**20 else f"{v / 1024:,.1f} KiB" if v >= 1024 else f"{v:,.0f} B"
         if kind == "share":
-            return f"{100 * v:.2f}%"
+            return f"{100 * v:.3g}%"
         if kind == "pct":
             return f"{100 * v:+.1f}%"
         if kind == "x":
