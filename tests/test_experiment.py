@@ -133,6 +133,9 @@ def test_config_command_prints_runs_and_count(tmp_path, capsys):
      "gpu-set.runner.workers: the number of processes changes no figure"),
     ('scenes = ["default"]\n[schemes.kbuffer]\nscheme = "tfss"\n', "schemes.kbuffer: the label names the scheme"),
     (b'scenes = ["d\xe9fault"]\n', "not UTF-8 text"),
+    ('scenes = ["default"]\nschemes = 3\n', "schemes: expected tables such as [schemes.kbuffer]"),
+    ('scenes = ["default"]\ngpus = ["nofile.toml"]\n[schemes.kbuffer]\n', "gpus: nofile.toml: no such GPU file"),
+    ('scenes = ["default"]\ndescription = """two\nlines"""\n[schemes.kbuffer]\n', "description: expected one line"),
 ])
 def test_bad_experiment_fails_before_running_with_one_line(tmp_path, capsys, text, message):
     (tmp_path / "configs").mkdir()

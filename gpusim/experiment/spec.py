@@ -208,7 +208,9 @@ def _parse_size(text: Any, where: str) -> tuple[int, int]:
 
 
 def _check_schemes(table: Any, where: str) -> list[SchemeEntry]:
-    if not isinstance(table, dict) or not table:
+    if table is not None and not isinstance(table, dict):
+        raise ConfigError(f"{where}: schemes: expected tables such as [schemes.kbuffer], got {table!r}")
+    if not table:
         raise ConfigError(f"{where}: schemes: name at least one scheme, e.g. [schemes.alpha-blend] "
                           f"(valid: {', '.join(scheme_names())})")
     entries = []
@@ -262,8 +264,8 @@ def experiment_from_data(data: dict, where: str, base_dir: Path, default_name: s
         raise ConfigError(f"{where}: name: {name!r} must be letters, digits, '.', '_' or '-' "
                           "(it names the output directory)")
     description = data.get("description", "")
-    if not isinstance(description, str):
-        raise ConfigError(f"{where}: description: expected a string")
+    if not isinstance(description, str) or "\n" in description:
+        raise ConfigError(f"{where}: description: expected one line of text")
     scenes, traces = _strings(data, "scenes", where), _strings(data, "traces", where)
     if not scenes and not traces:
         raise ConfigError(f"{where}: scenes: give scenes = [\"default\", ...] or traces = [\"traces/x.npz\"]")
@@ -323,6 +325,9 @@ def gpu_table(spec: str, exp: Experiment) -> tuple[dict, str]:
         except ConfigError as exc:
             raise ConfigError(f"{exp.path}: gpus: {exc}") from None
         return data, spec
+    if path.suffix == ".toml":
+        raise ConfigError(f"{exp.path}: gpus: {spec}: no such GPU file (looked beside the experiment and in the "
+                          "working directory)")
     raise ConfigError(f"{exp.path}: gpus: '{spec}' is not a GPU preset (valid: {', '.join(gpu_presets())}) "
                       "or a .toml file")
 

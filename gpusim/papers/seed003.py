@@ -286,6 +286,18 @@ def _sections(results: pd.DataFrame, stats: pd.DataFrame, frames: list[int]) -> 
                                 "Table 4-2's totals per frame (S_A = 4 B, S_f = 16 B, Z = 4 B); TFSS+LZE is the "
                                 "smallest section size run for its L_num that drops no fragment.", chart=pd.DataFrame(mem),
                                 chart_ylabel="memory (MiB)"))
+    reduction = _chart(frames, [*[(f"vs R-buffer, TFSS({n})", lambda f, n=n: 100 * (1 - tfss(results, f, n)
+                                                                               / rbuf(results, f))) for n in LNUMS],
+                                *[(f"vs WF({n}), TFSS({n})", lambda f, n=n: 100 * (1 - tfss(results, f, n)
+                                                                                  / wf(results, f, n))) for n in LNUMS],
+                                *[(f"vs R-buffer, TFSS+LZE({n})", lambda f, n=n: 100 * (1 - lze_best(results, f, n)
+                                                                                       / rbuf(results, f)))
+                                  for n in LNUMS]])
+    if reduction:
+        sections.append(Section("Figures 4-4 and 4-6: memory reduction per frame",
+                                "1 - TFSS's memory / the other system's, per frame (S_A = 4 B, S_f = 16 B, Z = 4 B); "
+                                "below zero TFSS needs more.", chart=pd.DataFrame(reduction),
+                                chart_ylabel="memory reduction (%)"))
     time = _chart(frames, [(label, lambda f, v=variant, p=params: one(results, "cycles", scene=frame_scene(f),
                                                                       variant=v, **p))
                            for label, variant, params in (

@@ -192,7 +192,7 @@ def grouped_bars(chart: pd.DataFrame, ylabel: str, title: str, path: Path, log: 
     groups = list(dict.fromkeys(chart["group"]))
     table = chart.pivot_table(index="x", columns="group", values="value", sort=False).reindex(index=xs,
                                                                                               columns=groups)
-    fig = Figure(figsize=(max(7.0, 0.28 * len(xs) * len(groups) + 2), 4.4))
+    fig = Figure(figsize=(min(13.0, max(7.0, 0.2 * len(xs) * len(groups) + 2)), 4.8))
     ax = fig.subplots()
     width = 0.8 / len(groups)
     colours = _colours(groups)
@@ -204,8 +204,9 @@ def grouped_bars(chart: pd.DataFrame, ylabel: str, title: str, path: Path, log: 
     if log:
         ax.set_yscale("log")
     ax.grid(True, axis="y", alpha=0.25)
-    ax.legend(fontsize=7, ncol=min(6, len(groups)), loc="upper left")
     ax.set_title(title, fontsize=10)
-    fig.tight_layout()
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, ncol=min(6, len(groups)), loc="lower center", frameon=False)
+    fig.tight_layout(rect=(0, 0.03 + 0.04 * -(-len(groups) // 6), 1, 1))
     return save(fig, path)
 
