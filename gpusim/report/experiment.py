@@ -89,9 +89,15 @@ class _Report:
                          f"{s['pixels']:,.0f} |")
             self.add("")
         levels = ", ".join(dict.fromkeys(r["fidelity"]))
-        self.add(f"GPUs: {', '.join(dict.fromkeys(r['gpu']))}. Fidelity levels: {levels}. Cycles are shader-clock "
-                 f"cycles of the modelled GPU; figures that compare schemes use the most faithful level run "
-                 f"(**{self.level or 'none'}**) and say so.", "")
+        if self.level is None:
+            self.add(f"Fidelity levels: {levels}: the functional models only, so no run has cycles.", "")
+        elif self.level == "thesis":
+            self.add(f"Fidelity levels: {levels}. Cycles are the thesis model's (one per counted memory access plus "
+                     "the per-pixel compute of seed 003 section 4.3.2), not a GPU's.", "")
+        else:
+            self.add(f"GPUs: {', '.join(dict.fromkeys(r['gpu']))}. Fidelity levels: {levels}. Cycles are "
+                     "shader-clock cycles of the modelled GPU; figures that compare schemes use the most faithful "
+                     f"level run (**{self.level}**) and say so.", "")
 
     def paper(self) -> None:
         """The "Paper vs gpusim" table (and the comparison's own sections) when the experiment names a paper."""

@@ -67,7 +67,7 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
             for x, y, text in zip(xs, ys, front["config"]):
                 ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
         ax.set_xscale("log")
-        ax.set_xlabel(f"simulated cycles ({level} level, shader clock)")
+        ax.set_xlabel("cycles (thesis model)" if level == "thesis" else f"simulated cycles ({level} level, shader clock)")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.25)
     handles, labels = fig.axes[0].get_legend_handles_labels()
