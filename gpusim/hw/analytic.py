@@ -142,8 +142,14 @@ def analytic_timing(result, work, gpu) -> dict:
             wis[p] += warp_threads * c0 if uniform else _warp_max(per_lane[present], ws).sum()
             ops = float(counts.sum())
             # first operation of each thread: coalescing (on a spread sample of warps) and the hottest address
-            if cls == MEM:
-                sample = _warp_sample(lanes_sel, ws)
+            # threads with no operation in this group have no address (a list walk of zero nodes)
+            live = None if not len(counts) or int(counts.min()) > 0 else counts > 0
+            lanes_live = lanes_sel if live is None else lanes_sel[live]
+            counts_live = counts if live is None else counts[live]
+            if not len(lanes_live):
+                pass                             # no thread issues this group in this pass
+            elif cls == MEM:
+                sample = _warp_sample(lanes_live, ws)
                 zero = np.broadcast_to(np.zeros(1, np.int64), sample.shape)
                 addr = bases[g.structure] + np.asarray(g.offset(sample, zero), np.int64)
                 bytes_ = float(nb) if nb is not None else float(np.mean(g.bytes(sample, zero)))
@@ -154,16 +160,18 @@ def analytic_timing(result, work, gpu) -> dict:
                                 -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
                 dram_bytes[p] += ops * requests_per_lane * req_bytes
             else:
-                zero = np.broadcast_to(np.zeros(1, np.int64), lanes_sel.shape)
-                addr = bases[g.structure] + np.asarray(g.offset(lanes_sel, zero), np.int64)
-            if cls == ATOMIC:
+                zero = np.broadcast_to(np.zeros(1, np.int64), lanes_live.shape)
+                addr = bases[g.structure] + np.asarray(g.offset(lanes_live, zero), np.int64)
+            if not len(lanes_live):
+                pass
+            elif cls == ATOMIC:
                 atomic_ops[p] += ops
                 hottest[p] = max(hottest[p], float(_hottest(addr)))
             elif cls == ROP:
                 unit = (addr // m.interleave_bytes) % gpu.rop.units
                 svc = (gpu.blender.cycles_per_op + (nb or 0) / gpu.blender.bytes_per_cycle
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
-                rop_unit[p] += np.bincount(unit, weights=counts * svc, minlength=gpu.rop.units)
+                rop_unit[p] += np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
             # dependent chains per lane: every operation issues; a dependent producer waits for each result,
             # and the first dependent operation after a producer waits once per thread
             add = per_lane * cost
