@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.transforms import Bbox
 
 from gpusim.atomic_io import atomic_output
 from gpusim.report.tables import pareto
@@ -50,6 +51,7 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
     the Pareto front drawn and its points labelled."""
     fig = Figure(figsize=(11, 5.2))
     colours = _colours(list(dict.fromkeys(points["scheme"])))
+    axes_labels = []
     for ax, column, label in zip(fig.subplots(1, 2), ("rmse", "differing_share"),
                                  ("RMSE against the exact reference (RGB in [0, 1])",
                                   "pixels differing by more than 1/255 (% of screen)")):
@@ -58,15 +60,14 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
             ax.scatter(rows["cycles"], rows[column] * scale, s=28, color=colours[scheme], label=scheme,
                        edgecolors="black", linewidths=0.4, zorder=3)
         front = pareto(points, "cycles", column)
-        for x, y, text in zip(points["cycles"], points[column] * scale, points["config"]):
-            if text not in set(front["config"]):
-                ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, -8), fontsize=5.5, color="0.4")
+        labels = [(x, y, text, True) for x, y, text in zip(front["cycles"], front[column] * scale, front["config"])]
+        labels += [(x, y, text, False) for x, y, text in zip(points["cycles"], points[column] * scale,
+                                                              points["config"]) if text not in set(front["config"])]
         if len(front):
             xs, ys = front["cycles"].to_numpy(), front[column].to_numpy() * scale
             ax.step(xs, ys, where="post", color="black", linewidth=1.0, alpha=0.7, zorder=2, label="Pareto front")
-            for x, y, text in zip(xs, ys, front["config"]):
-                ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
         ax.set_xscale("log")
+        axes_labels.append((ax, labels))
         ax.set_xlabel("cycles (thesis model)" if level == "thesis" else f"simulated cycles ({level} level, shader clock)")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.25)
@@ -74,7 +75,35 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
     fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=min(8, len(labels)), frameon=False)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(labels) / 8), 1, 1))
+    for ax, items in axes_labels:
+        _place_labels(fig, ax, items)
     return save(fig, path)
+
+
+def _place_labels(fig: Figure, ax, items: list[tuple]) -> None:
+    """Label points without overlap: the Pareto front's first (always drawn, at the first free offset), then the
+    others in grey where a free offset exists (a label that finds none is left out: its colour still says which
+    scheme the point is, and the tables list every run)."""
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    points = ax.transData.transform(np.array([(x, y) for x, y, _, _ in items], dtype=float)) if items else []
+    taken = [Bbox.from_bounds(px - 3, py - 3, 6, 6) for px, py in points]
+    offsets = ((4, 4), (4, -10), (-4, 4), (-4, -10), (4, 14), (4, -20))
+    for (x, y, text, on_front) in items:
+        placed = None
+        for dx, dy in offsets:
+            note = ax.annotate(text, (x, y), textcoords="offset points", xytext=(dx, dy),
+                               fontsize=7 if on_front else 5.5, color="black" if on_front else "0.4",
+                               ha="left" if dx > 0 else "right")
+            box = note.get_window_extent(renderer)
+            if not any(box.overlaps(t) for t in taken) and ax.bbox.contains(box.x1, box.y1) \
+                    and ax.bbox.contains(box.x0, box.y0):
+                placed = note
+                break
+            note.remove()
+        if placed is None and on_front:
+            placed = ax.annotate(text, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        if placed is not None:
+            taken.append(placed.get_window_extent(renderer))
 
 
 def fidelity_vs_wall(errors: pd.DataFrame, full_walls: pd.Series, title: str, path: Path) -> Path:
