@@ -300,12 +300,19 @@ def _check_sources(exp: Experiment) -> None:
     from gpusim.experiment.grid import scene_overrides, set_combinations
     from gpusim.scene import load_scene
     for scene in exp.scenes:
+        spec = str(exp.resolve_path(scene)) if Path(scene).suffix else scene
+        try:
+            load_scene(spec)                 # a problem of the scene itself
+        except GpusimError as exc:
+            raise ConfigError(f"{exp.path}: scenes: {scene}: {exc}") from None
         for combo in set_combinations(exp.scene_set):
             try:
-                load_scene(str(exp.resolve_path(scene)) if Path(scene).suffix else scene,
-                           scene_overrides(exp, combo))
-            except GpusimError as exc:
-                raise ConfigError(f"{exp.path}: scenes: {scene}: {exc}") from None
+                load_scene(spec, scene_overrides(exp, combo))
+            except GpusimError as exc:       # a problem of the experiment's overrides: name them, not the file
+                head, _, rest = str(exc).partition(": ")
+                text = (rest if Path(head).suffix else str(exc)).removeprefix("--set ")
+                what = "scene-set" if combo else "size"
+                raise ConfigError(f"{exp.path}: {what} on scene {scene}: {text}") from None
     for trace in exp.traces:
         if not exp.resolve_path(trace).is_file():
             raise ConfigError(f"{exp.path}: traces: {trace}: no such file (make it with gpusim trace, "
