@@ -8,7 +8,7 @@ threshold's table. The experiment is configs/experiments/seed-002.toml, on
 look-alikes of seven of the paper's twelve scenes (configs/scenes/like-*.toml:
 triangle counts, screen coverage and samples per pixel like the paper's) at
 320x166, 64x fewer pixels than the paper's 2560x1330, on the ``modern``
-preset (the paper's GPUs, an RTX 3050 Ti and an RX 6700 XT, have no preset).
+preset (the paper's GPUs, printed as a "GTX 3050 TI" and an RX 6700 XT, have no preset).
 """
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                        count / PAPER_PIXELS, scene,
                        lambda s=scene, df=df: one(results, "stat.invalid_share", scene=s, variant="lucidraster",
                                                   depth_filter=df),
-                       f"the look-alike at {screen} against the paper's scene at 2560x1330", "share")
+                       f"the look-alike at {screen} against the paper's scene (its counts match 2560x1330)", "share")
         for df, paper in zip((8, 12), TIME_VS_DF3[name]):
             _per_scene(rows, results, f"§4 sorting errors, {name}", f"time at DF={df} / time at DF=3", paper, scene,
                        lambda s=scene, df=df: _cycles(results, s, "lucidraster", depth_filter=df)

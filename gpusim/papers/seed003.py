@@ -150,7 +150,7 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                                                                       REDUCTION_WF)):
         note = ("S_f = 16 B (x, y, z 32-bit, RGBA 8-bit), S_A = 4 B, Z = 4 B, L_num 1-3 on every frame; the thesis "
                 "states none of these (see the sensitivity section)")
-        rows.append(guarded(lambda v=values: _mean(v), "Fig. 4-4", f"TFSS memory reduction {label}, mean", paper[0],
+        rows.append(guarded(lambda v=values: _mean(v), "§5.1", f"TFSS memory reduction {label}, mean", paper[0],
                             note, "share"))
         rows.append(guarded(lambda v=values: min(v) if v else _mean(v), "Fig. 4-4",
                             f"TFSS memory reduction {label}, lowest", paper[1], "over frames and L_num", "share"))

@@ -5,8 +5,9 @@ Target: Table 1 (depth peeling with the k-buffer on a GeForce 7900 GTX at
 (SP) and the single pass with the heuristics (SPwH: primitives sorted by
 centroid, batches of 32 with a flush after each), on Dragon (871K triangles),
 Powerplant (12.7M) and Lucy (28M), with k = 4 RGBZ and k = 16 Z-only entries;
-and the RMW hazards that make the heuristics necessary (the report's images
-show the image replayed in event order). Table 2 (geometry subdivision) needs a
+and the RMW hazards that make the heuristics necessary (the paper's Fig. 3
+shows their artifacts; gpusim's report shows its images replayed in event
+order). Table 2 (geometry subdivision) needs a
 volume scene and the k-nearly-sorted disorder statistic, which gpusim does not
 model yet. The experiment is configs/experiments/seed-004.toml, on look-alike
 scenes (configs/scenes/like-*.toml; Powerplant and Lucy scaled down) and the
@@ -62,9 +63,11 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
         rows.append(guarded(lambda s=scene: one(results, "hazards", scene=s, variant="sp", k=4, fidelity="full"),
                             f"§3.2 / Fig. 3, {name}", "RMW hazards of SP, k = 4 (fragments)", "> 0",
                             "the paper shows the artifacts (Fig. 3) without counting them"))
-        rows.append(guarded(lambda s=scene: one(results, "hazards", scene=s, variant="spwh", k=4, fidelity="full"),
-                            f"§3.2, {name}", "RMW hazards of SPwH, k = 4 (fragments)", "< 1",
-                            "the paper: the heuristics (sorted batches of 32, flushed) remove the hazards"))
+        rows.append(guarded(lambda s=scene: one(results, "hazards", scene=s, variant="spwh", k=4, fidelity="full")
+                            / one(results, "hazards", scene=s, variant="sp", k=4, fidelity="full"),
+                            f"§3.2, {name}", "RMW hazards of SPwH / of SP, k = 4", "< 1",
+                            "the paper: the heuristics (sorted batches of 32, flushed) reduce the artifacts; its "
+                            "Fig. 3(b) still shows some", "x"))
     for budget, total, error in TABLE_2:
         rows.append(PaperRow("Table 2", f"max disorder at subdivision budget {budget}x ({total} triangles)", error,
                              NOT_MODELLED, "geometry subdivision and the heart volume mesh are not modelled yet"))
