@@ -127,13 +127,13 @@ def _stat(unit: str, stat: str, value: Any, value_unit: str, description: str, l
             "description": description}
 
 
-def stat_rows(record: dict) -> list[dict]:
-    """Every stat of a run's record in long form: (unit, stat, labels, value, value_unit, description).
+def functional_stat_rows(record: dict) -> list[dict]:
+    """The functional model's stats in long form: (unit, stat, labels, value, value_unit, description).
 
-    ``unit`` is who counts it: ``scheme`` (its structures, accesses and own stats), ``metrics`` (image
-    error), ``machine`` (cycles, passes, hazards) or a hardware unit (``dram``, ``atomic``, ``rop``, ...).
-    ``labels`` are ``key=value`` pairs joined by commas (``structure=depth_array,operation=load``).
-    Wall times are left out: they are not results of the model.
+    ``unit`` is who counts it: ``scheme`` (its structures, accesses and own stats) or ``metrics`` (image
+    error); :func:`timing_stat_rows` adds ``machine`` (cycles, passes, hazards) and the hardware units
+    (``dram``, ``atomic``, ``rop``, ...). ``labels`` are ``key=value`` pairs joined by commas
+    (``structure=depth_array,operation=load``). Wall times are left out: they are not results of the model.
     """
     rows = []
     for name, size in record["footprint_bytes"].items():
@@ -154,27 +154,30 @@ def stat_rows(record: dict) -> list[dict]:
     for name in ("rmse", "psnr", "differing_pixels", "differing_share", "max_abs"):
         rows.append(_stat("metrics", name, record["error"][name], {"psnr": "dB", "differing_pixels": "pixels"}
                           .get(name, "1"), "image error against the exact reference"))
-    timing = record.get("timing")
-    if timing:
-        rows.append(_stat("machine", "cycles", timing["cycles"], "cycles", f"run time ({timing['fidelity']})"))
-        for i, p in enumerate(timing.get("passes", [])):
-            labels = f"pass={p['name']},index={i},kind={p['kind']}" + (f",bound={p['bound']}" if "bound" in p else "")
-            rows.append(_stat("machine", "pass_cycles", p["cycles"], "cycles", "cycles of one pass", labels))
-        if timing.get("rmw_hazards") is not None:
-            rows.append(_stat("machine", "rmw_hazards", timing["rmw_hazards"], "fragments",
-                              "fragments that read an obsolete value (RMW hazard)"))
-        for s in timing.get("unit_stats", []):
-            rows.append(_stat(s["unit"], s["stat"], s["value"], s["unit_of_measure"], s["doc"],
-                              f"instance={s['instance']}"))
-        per_instance = {s["unit"] for s in timing.get("unit_stats", [])}
-        for unit, summary in timing.get("units", {}).items():
-            if unit not in per_instance:        # a unit without per-instance stats (the core; analytic units)
-                for stat, value in summary.items():
-                    rows.append(_stat(unit, stat, value, "cycles" if stat.endswith("cycles") else "1",
-                                      f"{stat} of the {unit} units ({timing['fidelity']} estimate)"))
-        for key in ("memory_cycles", "compute_cycles"):
-            if key in timing:
-                rows.append(_stat("machine", key, timing[key], "cycles", f"thesis model: {key.replace('_', ' ')}"))
+    return [r for r in rows if r is not None]
+
+
+def timing_stat_rows(timing: dict) -> list[dict]:
+    """A timing level's stats in long form (see :func:`functional_stat_rows`)."""
+    rows = [_stat("machine", "cycles", timing["cycles"], "cycles", f"run time ({timing['fidelity']})")]
+    for i, p in enumerate(timing.get("passes", [])):
+        labels = f"pass={p['name']},index={i},kind={p['kind']}" + (f",bound={p['bound']}" if "bound" in p else "")
+        rows.append(_stat("machine", "pass_cycles", p["cycles"], "cycles", "cycles of one pass", labels))
+    if timing.get("rmw_hazards") is not None:
+        rows.append(_stat("machine", "rmw_hazards", timing["rmw_hazards"], "fragments",
+                          "fragments that read an obsolete value (RMW hazard)"))
+    for s in timing.get("unit_stats", []):
+        rows.append(_stat(s["unit"], s["stat"], s["value"], s["unit_of_measure"], s["doc"],
+                          f"instance={s['instance']}"))
+    per_instance = {s["unit"] for s in timing.get("unit_stats", [])}
+    for unit, summary in timing.get("units", {}).items():
+        if unit not in per_instance:            # a unit without per-instance stats (the core; analytic units)
+            for stat, value in summary.items():
+                rows.append(_stat(unit, stat, value, "cycles" if stat.endswith("cycles") else "1",
+                                  f"{stat} of the {unit} units ({timing['fidelity']} estimate)"))
+    for key in ("memory_cycles", "compute_cycles"):
+        if key in timing:
+            rows.append(_stat("machine", key, timing[key], "cycles", f"thesis model: {key.replace('_', ' ')}"))
     return [r for r in rows if r is not None]
 
 
@@ -195,11 +198,11 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
     except Exception as exc:                 # noqa: BLE001 - every run of the task fails with this line
         return [Outcome(r.run_id, "failed", one_line(exc)) for r in task.runs]
     image = rgb8(result.image)
-    base = functional_figures(record)
+    base, base_stats = functional_figures(record), functional_stat_rows(record)
     outcomes = []
     for run in task.runs:
         rec = dict(record)
-        figures = dict(base)
+        figures, stats = dict(base), list(base_stats)
         images = {"image": image}
         if run.fidelity != "none":
             start = time.perf_counter()
@@ -213,7 +216,8 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
             if gpu_config is not None:
                 rec["gpu_config"] = gpu_config
             figures |= timing_figures(timing)
+            stats += timing_stat_rows(timing)
             if timed is not None:
                 images["image-timed"] = rgb8(timed)
-        outcomes.append(Outcome(run.run_id, "ok", "", figures, stat_rows(rec), rec, images))
+        outcomes.append(Outcome(run.run_id, "ok", "", figures, stats, rec, images))
     return outcomes

@@ -35,10 +35,6 @@ def _worker_init(parent: int) -> None:
     threading.Thread(target=watch, daemon=True, name="gpusim-parent-watch").start()
 
 
-def _execute_path(task: Task) -> list[Outcome]:
-    return execute(task)
-
-
 class InlineExecutor:
     """Tasks one after another in this process (``--workers 1``)."""
 
@@ -66,7 +62,7 @@ class LocalExecutor:
         # up stops the sweep here (which stops them) instead of printing their tracebacks
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
-            pending = {self.pool.submit(_execute_path, task): task for task in tasks}
+            pending = {self.pool.submit(execute, task): task for task in tasks}
         finally:
             signal.signal(signal.SIGINT, previous)
         while pending:

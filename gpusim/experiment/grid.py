@@ -120,12 +120,13 @@ def _params(entry, where: str) -> list[dict]:
 
 def expand(exp) -> list[RunSpec]:
     """Every grid point of ``exp`` in order; bad GPU keys, scheme parameters and values fail here."""
-    from gpusim.experiment.spec import build_gpu
+    from gpusim.experiment.spec import build_gpu, gpu_table
     gpu_combos = set_combinations(exp.gpu_set)
     machines: dict[tuple, GpuConfig] = {}
     for gpu in exp.gpus:
+        table = gpu_table(gpu, exp)           # read (and a file validated) once per GPU
         for combo in gpu_combos:
-            machines[(gpu, combo)] = build_gpu(gpu, [f"{k}={_toml_value(v)}" for k, v in combo], exp)
+            machines[(gpu, combo)] = build_gpu(table, [f"{k}={_toml_value(v)}" for k, v in combo], exp)
     params = {entry.label: _params(entry, exp.path) for entry in exp.schemes}
     runs: list[RunSpec] = []
     for source in sources(exp):
@@ -153,7 +154,8 @@ def resolved_run(run: RunSpec, trace_sha: str) -> dict:
     """The run's resolved config: what its id hashes and what ``runs/<run>/config.toml`` records."""
     return {"scene": run.source.label, "source": {"kind": run.source.kind, "spec": run.source.spec,
                                                   "overrides": list(run.source.overrides)},
-            "scene_set": dict(run.source.scene_set), "trace_sha256": trace_sha, "scheme": run.scheme, "variant": run.label, "params": run.params,
+            "scene_set": dict(run.source.scene_set), "trace_sha256": trace_sha, "scheme": run.scheme,
+            "variant": run.label, "params": run.params,
             "fidelity": run.fidelity, "gpu": run.gpu, "gpu_set": dict(run.gpu_set),
             "gpu_config": gpu_identity(run.gpu_config)}
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpusim.experiment.execute import Outcome, Task, TaskRun, reference_path
+from gpusim.experiment.execute import Outcome, Task, TaskRun
 from gpusim.experiment.executors import make_executor, probe
 from gpusim.experiment.grid import GPU_LEVELS, RunSpec, expand, resolved_run, run_id
 from gpusim.experiment.spec import Experiment
@@ -114,8 +114,8 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
     store.remove_stale_temporaries()
     traces, infos = {}, {}
     for source, (trace, sha) in built.items():
-        path = store.save_trace(trace, source.label, sha)
-        traces[str(path)] = (trace, np.load(reference_path(path)))
+        path, reference = store.save_trace(trace, source.label, sha)
+        traces[str(path)] = (trace, reference)
         infos[source] = {"sha": sha, "path": str(path), "rel": os.path.relpath(path, out),
                          "width": trace.width, "height": trace.height}
     ids = [run_id(r, infos[r.source]["sha"]) for r in runs]
@@ -153,8 +153,6 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
     skipped = sum(summary.skip_reasons.values())
     say(f"{exp.name}: {len(runs)} runs ({skipped} skipped), {summary.reused} reused from {out}, "
         f"{todo} to compute {where}")
-
-    by_id = dict(zip(ids, runs))
 
     def tables():
         rows, stats = [], []
@@ -196,7 +194,7 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
             summary.ok += 1
         elif o is not None:
             summary.failed += 1
-            summary.failures.append((describe_run(by_id[i]), o.error))
+            summary.failures.append((describe_run(r), o.error))
     return summary
 
 

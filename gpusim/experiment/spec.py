@@ -34,7 +34,7 @@ from typing import Any
 from gpusim.config import apply_overrides, build, load_toml, parse_override
 from gpusim.errors import ConfigError, GpusimError
 from gpusim.hw import FIDELITIES, gpu_presets
-from gpusim.hw.gpu import GPU_DIR, GpuConfig
+from gpusim.hw.gpu import GpuConfig, preset_file
 from gpusim.schemes import scheme_class, scheme_names
 
 EXPERIMENT_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiments"
@@ -319,19 +319,18 @@ def _check_sources(exp: Experiment) -> None:
                               f"or fix the path)")
 
 
-def gpu_table(spec: str, exp: Experiment) -> tuple[dict, str]:
-    """The parsed TOML of a GPU preset or file, and the name to show for it."""
-    from gpusim.config import load_toml as _load
+def gpu_table(spec: str, exp: Experiment) -> dict:
+    """The parsed TOML of a GPU preset or file (a file is validated here, so its own errors name it)."""
     if spec in gpu_presets():
-        return _load(GPU_DIR / f"{spec}.toml"), spec
+        return load_toml(preset_file(spec))
     path = exp.resolve_path(spec)
     if path.suffix == ".toml" and path.is_file():
-        data = _load(path)
+        data = load_toml(path)
         try:
             build(GpuConfig, copy.deepcopy(data), str(path))
         except ConfigError as exc:
             raise ConfigError(f"{exp.path}: gpus: {exc}") from None
-        return data, spec
+        return data
     if path.suffix == ".toml":
         raise ConfigError(f"{exp.path}: gpus: {spec}: no such GPU file (looked beside the experiment and in the "
                           "working directory)")
@@ -339,9 +338,10 @@ def gpu_table(spec: str, exp: Experiment) -> tuple[dict, str]:
                       "or a .toml file")
 
 
-def build_gpu(spec: str, overrides: list[str], exp: Experiment) -> GpuConfig:
-    """A GPU preset or file with the ``gpu-set`` overrides applied; bad keys name the experiment file."""
-    data, _ = gpu_table(spec, exp)
+def build_gpu(table: dict, overrides: list[str], exp: Experiment) -> GpuConfig:
+    """A GPU's table (from :func:`gpu_table`) with the ``gpu-set`` overrides applied; bad keys name the
+    experiment file."""
+    data = copy.deepcopy(table)
     try:
         apply_overrides(data, overrides)
     except ConfigError as exc:

@@ -113,24 +113,25 @@ class ResultsStore:
                 done[run_id] = Outcome(run_id, "ok", "", data["figures"], data["stats"])
         return done
 
-    def save_trace(self, trace, label: str, sha: str) -> Path:
+    def save_trace(self, trace, label: str, sha: str) -> tuple[Path, np.ndarray]:
         """The trace, its exact reference composite (``.reference.npy``, float64) and the reference as a PNG
-        under traces/, each once per content; returns the trace's path. Tasks read the reference instead of
-        compositing it again."""
+        under traces/, each once per content; returns the trace's path and the reference. Tasks read the
+        reference instead of compositing it again."""
         from gpusim.trace_io import save_trace
         path = self.root / "traces" / f"{label}-{sha[:12]}.npz"
         if not path.is_file():
             save_trace(trace, path)
         ref_path, png = reference_path(path), path.with_suffix(".png")
-        if not (ref_path.is_file() and png.is_file()):
-            from gpusim.experiment.execute import rgb8
-            from gpusim.metrics import composite_exact
-            from gpusim.report.images import save_rgb8_png
-            reference = composite_exact(trace)
-            with atomic_output(ref_path) as handle:
-                np.save(handle, reference)
-            save_rgb8_png(rgb8(reference), png)
-        return path
+        if ref_path.is_file() and png.is_file():
+            return path, np.load(ref_path)
+        from gpusim.experiment.execute import rgb8
+        from gpusim.metrics import composite_exact
+        from gpusim.report.images import save_rgb8_png
+        reference = composite_exact(trace)
+        with atomic_output(ref_path) as handle:
+            np.save(handle, reference)
+        save_rgb8_png(rgb8(reference), png)
+        return path, reference
 
     def save_outcome(self, outcome: Outcome, config: dict) -> None:
         """Write a run's files; its outcome.json last, so a run is finished only once all are there."""

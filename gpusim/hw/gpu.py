@@ -191,6 +191,11 @@ def gpu_presets() -> list[str]:
     return sorted(p.stem for p in GPU_DIR.glob("*.toml"))
 
 
+def preset_file(name: str) -> Path:
+    """The file of the GPU preset ``name`` (configs/gpus/NAME.toml)."""
+    return GPU_DIR / f"{name}.toml"
+
+
 def load_gpu(spec: str | None = None, overrides: list[str] | None = None) -> GpuConfig:
     """A preset name (configs/gpus/NAME.toml) or a TOML file path; ``overrides`` are ``a.b=value``."""
     spec = spec or DEFAULT_GPU
@@ -199,6 +204,6 @@ def load_gpu(spec: str | None = None, overrides: list[str] | None = None) -> Gpu
         if spec not in gpu_presets():
             raise ConfigError(f"--gpu {spec}: unknown GPU preset (valid: {', '.join(gpu_presets())}, "
                               f"or a .toml file)")
-        path = GPU_DIR / f"{spec}.toml"
+        path = preset_file(spec)
     data = apply_overrides(load_toml(path), overrides or [])
     return build(GpuConfig, data, str(path))

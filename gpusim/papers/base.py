@@ -101,3 +101,16 @@ def guarded(make_row, source: str, quantity: str, paper, note: str = "", kind: s
     except Missing:
         ours = "not run in this experiment"
     return PaperRow(source, quantity, paper, ours, note, kind)
+
+
+def mean(values: list[float]) -> float:
+    """The mean of the figures a comparison found; :class:`Missing` when it found none."""
+    if not values:
+        raise Missing("nothing to average")
+    return sum(values) / len(values)
+
+
+def fps(results: pd.DataFrame, **filters: Any) -> float:
+    """Frames per second at the GPU's clock of the one full-level run matching ``filters``: 10^6 over its
+    microseconds."""
+    return 1e6 / one(results, "microseconds", fidelity="full", **filters)

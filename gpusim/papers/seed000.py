@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from gpusim.papers.base import NOT_MODELLED, Comparison, Missing, PaperRow, guarded, one, select
+from gpusim.papers.base import NOT_MODELLED, Comparison, Missing, PaperRow, fps, guarded, one, select
 
 MODELS = ("Dragon", "Buddha", "Lucy", "Neptune", "Bunny")
 SCENE = {"Dragon": "like-dragon", "Buddha": "like-buddha", "Lucy": "like-lucy", "Neptune": "like-neptune",
@@ -54,8 +54,7 @@ TABLE_1_001 = {"CUDP1": ((321, 287, 153, 59, 459), "freepipe-mdts"),
 
 
 def _fps(results: pd.DataFrame, scene: str, variant: str) -> float:
-    """Frames per second at the GPU's clock: 10^6 over the full level's microseconds."""
-    return 1e6 / one(results, "microseconds", scene=scene, variant=variant, fidelity="full")
+    return fps(results, scene=scene, variant=variant)
 
 
 def _passes(results: pd.DataFrame, scene: str, variant: str) -> float:
@@ -81,15 +80,15 @@ def _memory_mb(results: pd.DataFrame, stats: pd.DataFrame, variant: str) -> floa
 
 def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
     rows: list[PaperRow] = []
-    for method, (fps, passes, _) in TABLE_3.items():
+    for method, (rates, passes, _) in TABLE_3.items():
         variant = VARIANT[method]
         for i, model in enumerate(MODELS):
             if variant is None:
-                rows.append(PaperRow(f"000 Table 3, {model}", f"{method} frame rate (fps)", fps[i], NOT_MODELLED,
+                rows.append(PaperRow(f"000 Table 3, {model}", f"{method} frame rate (fps)", rates[i], NOT_MODELLED,
                                      "gpusim has no model of this method yet"))
                 continue
             rows.append(guarded(lambda m=model, v=variant: _fps(results, SCENE[m], v), f"000 Table 3, {model}",
-                                f"{method} frame rate (fps)", fps[i],
+                                f"{method} frame rate (fps)", rates[i],
                                 f"the {TRIANGLES[model]}-triangle look-alike; shader clock / full-level cycles"))
             if passes is not None:
                 rows.append(guarded(lambda m=model, v=variant: _passes(results, SCENE[m], v), f"000 Table 3, {model}",
@@ -113,16 +112,16 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                             f"{method} memory (MB)", mb,
                             f"{counted} at 512x512 with the scheme's defaults (20 layers, 8 samples, k = 8); the "
                             "paper counts depth entries, not the colour structures we report beside them"))
-    for name, fps in TABLE_2.items():
+    for name, rates in TABLE_2.items():
         for i, model in enumerate(MODELS):
-            rows.append(PaperRow(f"000 Table 2, {model}", f"{name} opaque frame rate (fps)", fps[i], NOT_MODELLED,
+            rows.append(PaperRow(f"000 Table 2, {model}", f"{name} opaque frame rate (fps)", rates[i], NOT_MODELLED,
                                  "opaque rendering (a z-buffer pass) is not modelled yet"))
-    for method, (fps, variant) in TABLE_1_001.items():
+    for method, (rates, variant) in TABLE_1_001.items():
         for i, model in enumerate(CUDP_MODELS):
             note = "the 4.0M-triangle Neptune look-alike stands in for the 10M Statue (2.5x fewer triangles)" \
                 if model == "Statue" else f"the {TRIANGLES[model]}-triangle look-alike"
             rows.append(guarded(lambda m=model, v=variant: _fps(results, CUDP_SCENE[m], v), f"001 Table 1, {model}",
-                                f"{method} frame rate (fps)", fps[i], note))
+                                f"{method} frame rate (fps)", rates[i], note))
     return Comparison("Seeds 000 and 001: FreePipe (Liu et al. 2010) and single-pass depth peeling via CUDA",
                       rows, [], _summary(results))
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from gpusim.papers.base import NOT_MODELLED, Comparison, Missing, PaperRow, Section, guarded, one, select
+from gpusim.papers.base import NOT_MODELLED, Comparison, Missing, PaperRow, Section, guarded, mean, one, select
 
 #: the introduction's table (times relative to hardware alpha blending, from the MBOIT paper; LucidRaster's own)
 RELATIVE_TIME = (("Weighted-blended OIT", 1.17, "wboit"), ("MLAB, 2 layers", 2.78, None),
@@ -72,12 +72,6 @@ def _screen(results: pd.DataFrame) -> str:
     return f"{int(runs['width'].iloc[0])}x{int(runs['height'].iloc[0])}" if len(runs) else "our size"
 
 
-def _mean(values: list[float]) -> float:
-    if not values:
-        raise Missing("nothing to average")
-    return sum(values) / len(values)
-
-
 def _sw_hw(results, scene) -> float:
     return _cycles(results, scene, "lucidraster", depth_filter=3) / _cycles(results, scene, "alpha-blend")
 
@@ -123,7 +117,7 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                                  "gpusim has no model of this method yet", "x"))
             continue
         params = {"depth_filter": 3} if variant == "lucidraster" else {}
-        rows.append(guarded(lambda v=variant, p=params: _mean(_relative(results, v, **p)), "§1 table",
+        rows.append(guarded(lambda v=variant, p=params: mean(_relative(results, v, **p)), "§1 table",
                             f"{name}: time / hardware alpha blending, mean over scenes", paper,
                             "simulated cycles on our look-alikes; the paper's figure averages its scenes on two GPUs",
                             "x"))
@@ -138,7 +132,7 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
     except Missing:
         shares = {k: [] for k in STAGES}
     for stage, paper in STAGE_SHARES.items():
-        rows.append(guarded(lambda v=shares[stage]: _mean(v), "§3 NVidia table, averages",
+        rows.append(guarded(lambda v=shares[stage]: mean(v), "§3 NVidia table, averages",
                             f"share of LucidRaster's time in {stage}", paper,
                             "our passes: setup; bin-count, bin-offsets, bin-write; raster", "share"))
     for name, counts in INVALID.items():
@@ -163,7 +157,8 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
             continue
         rows.append(guarded(lambda s=scene: _cycles(results, s, "lucidraster", depth_filter=3)
                             / _cycles(results, s, "lucidraster-threshold"),
-                            f"§4 alpha threshold, {name}", f"speed-up off / on at opacity {opacity}", paper, note, "x"))
+                            f"§4 alpha threshold, {name}", f"speed-up off / on at opacity {opacity}", paper, note,
+                            "x"))
     return Comparison("Seed 002: LucidRaster (Jakubowski)", rows, _sections(results), _summary(results))
 
 
@@ -187,8 +182,8 @@ def _sections(results: pd.DataFrame) -> list[Section]:
 
 def _summary(results: pd.DataFrame) -> str:
     try:
-        lucid = _mean(_relative(results, "lucidraster", depth_filter=3))
-        wboit = _mean(_relative(results, "wboit"))
+        lucid = mean(_relative(results, "lucidraster", depth_filter=3))
+        wboit = mean(_relative(results, "wboit"))
     except Missing:
         return "The experiment ran none of the timed comparisons."
     text = (f"On {len(_scenes(results))} look-alike scenes at {_screen(results)}, LucidRaster takes {lucid:.1f}x "

@@ -19,7 +19,7 @@ import math
 
 import pandas as pd
 
-from gpusim.papers.base import Comparison, Missing, PaperRow, Section, guarded, one, select
+from gpusim.papers.base import Comparison, Missing, PaperRow, Section, guarded, mean, one, select
 
 FRAMES = (60, 120, 180, 240, 300, 360, 420, 480)
 W, H = 640, 480
@@ -92,12 +92,6 @@ def _frames_run(results: pd.DataFrame) -> list[int]:
     return [f for f in FRAMES if (results["scene"] == frame_scene(f)).any()]
 
 
-def _mean(values: list[float]) -> float:
-    if not values:
-        raise Missing("nothing to average")
-    return sum(values) / len(values)
-
-
 def table_4_2(frame: int, l_num: int = 2, d_avg: int = 2, sa: int = 4, sf: int = 16, z: int = 4) -> dict[str, int]:
     """Table 4-2's memory formulas evaluated on Table 4-1's row for ``frame`` (bytes)."""
     _, transparent, hist = TABLE_4_1[frame]
@@ -138,7 +132,7 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                                             d_avg=2, address_bytes=4),
                             f"§4.3.2, Frame{f}", "Weight-Factor execution time (cycles)", t_wf,
                             "as above; the pointer memory is read in parallel and not counted [derived]"))
-    rows.append(guarded(lambda: _mean([1 - one(results, "cycles", scene=frame_scene(f), variant="tfss", l_num=2,
+    rows.append(guarded(lambda: mean([1 - one(results, "cycles", scene=frame_scene(f), variant="tfss", l_num=2,
                                                address_bytes=4)
                                        / one(results, "cycles", scene=frame_scene(f), variant="r-buffer",
                                              fragment_bytes=16, depth_bytes=4) for f in frames]),
@@ -150,11 +144,11 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                                                                       REDUCTION_WF)):
         note = ("S_f = 16 B (x, y, z 32-bit, RGBA 8-bit), S_A = 4 B, Z = 4 B, L_num 1-3 on every frame; the thesis "
                 "states none of these (see the sensitivity section)")
-        rows.append(guarded(lambda v=values: _mean(v), "§5.1", f"TFSS memory reduction {label}, mean", paper[0],
+        rows.append(guarded(lambda v=values: mean(v), "§5.1", f"TFSS memory reduction {label}, mean", paper[0],
                             note, "share"))
-        rows.append(guarded(lambda v=values: min(v) if v else _mean(v), "Fig. 4-4",
+        rows.append(guarded(lambda v=values: min(v) if v else mean(v), "Fig. 4-4",
                             f"TFSS memory reduction {label}, lowest", paper[1], "over frames and L_num", "share"))
-        rows.append(guarded(lambda v=values: max(v) if v else _mean(v), "Fig. 4-4",
+        rows.append(guarded(lambda v=values: max(v) if v else mean(v), "Fig. 4-4",
                             f"TFSS memory reduction {label}, highest", paper[2], "over frames and L_num", "share"))
     rows.append(guarded(lambda: tfss(results, 480, 3) / rbuf(results, 480), "Fig. 4-3, Frame480",
                         "TFSS(L_num=3) memory / R-buffer memory", "> 1",
@@ -163,7 +157,7 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                         "Fig. 4-3, other frames", "TFSS(L_num=3) memory / R-buffer memory, highest", "< 1",
                         "the thesis finds TFSS below R-buffer on every other frame", "x"))
     lze = _lze(results, frames)
-    rows.append(guarded(lambda: _mean(lze["saving"]), "§5.2", "memory leading-0s elimination saves (TFSS, mean)",
+    rows.append(guarded(lambda: mean(lze["saving"]), "§5.2", "memory leading-0s elimination saves (TFSS, mean)",
                         LZE_SAVING, "best section size run for each L_num; colours uniform in [0, 0.078] as the "
                         "bundled frames draw them (Table 4-1 gives none)", "share"))
     rows.append(guarded(lambda: min(lze["rb"]), "Fig. 4-6", "TFSS+LZE memory reduction vs R-buffer, lowest",
@@ -174,7 +168,7 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                         LZE_REDUCTION_WF[0], LZE_NOTE, "share"))
     rows.append(guarded(lambda: max(lze["wf"]), "Fig. 4-6", "TFSS+LZE memory reduction vs Weight-Factor, highest",
                         LZE_REDUCTION_WF[1], LZE_NOTE, "share"))
-    rows.append(guarded(lambda: _mean(lze["wf"]), "§5.1", "TFSS+LZE memory reduction vs Weight-Factor, mean",
+    rows.append(guarded(lambda: mean(lze["wf"]), "§5.1", "TFSS+LZE memory reduction vs Weight-Factor, mean",
                         LZE_VS_WF_MEAN, LZE_NOTE, "share"))
     return Comparison("Seed 003: Transparent Fragment Storage System (Lin 2007)", rows,
                       _sections(results, stats, frames), _summary(results, frames))
@@ -214,10 +208,10 @@ def _sensitivity(results: pd.DataFrame, frames: list[int]) -> pd.DataFrame:
                 rb, w = reductions(results, frames, int(sa), int(sf), int(z))
                 if not rb:
                     continue
-                distance = abs(_mean(rb) - REDUCTION_RB[0]) + abs(_mean(w) - REDUCTION_WF[0])
+                distance = abs(mean(rb) - REDUCTION_RB[0]) + abs(mean(w) - REDUCTION_WF[0])
                 rows.append({"S_A (B)": int(sa), "S_f (B)": int(sf), "Z (B)": int(z),
-                             "vs R-buffer mean": _mean(rb), "lowest": min(rb), "highest": max(rb),
-                             "vs WF mean": _mean(w), "WF lowest": min(w), "WF highest": max(w),
+                             "vs R-buffer mean": mean(rb), "lowest": min(rb), "highest": max(rb),
+                             "vs WF mean": mean(w), "WF lowest": min(w), "WF highest": max(w),
                              "distance to the thesis": distance})
     return pd.DataFrame(rows)
 
@@ -246,12 +240,13 @@ def _lze_explained(results: pd.DataFrame, stats: pd.DataFrame, frames: list[int]
         saving.append(1 - float(packed["stat.storage_system_bytes"].iloc[0]) / total)
     if not bits:
         return ""
-    return (f"At L_num = 2 and the best section size run, a compressed fragment averages {_mean(bits):.1f} of 64 bits "
-            f"and the T-buffer shrinks by {_mean(shrink):.0%}, but the T-buffer is only {_mean(share):.0%} of TFSS's "
+    return (f"At L_num = 2 and the best section size run, a compressed fragment averages {mean(bits):.1f} of 64 bits "
+            f"and the T-buffer shrinks by {mean(shrink):.0%}, but the T-buffer is only {mean(share):.0%} of TFSS's "
             f"memory with S_A = 4 B (the SSA table, W x H x S_A, is most of the rest), and the Length Table adds "
-            f"its own bytes: TFSS saves {_mean(saving):.1%} in all (the thesis: 5%). This is a difference of the "
+            f"its own bytes: TFSS saves {mean(saving):.1%} in all (the thesis: 5%). This is a difference of the "
             "unstated sizes and of the colours, not of the method: with S_A = 2 B the SSA table would halve and "
-            "the T-buffer's share, and so the saving, would grow; the bundled frames draw colours uniformly in [0, 0.078] "
+            "the T-buffer's share, and so the saving, would grow; the bundled frames draw colours uniformly in "
+            "[0, 0.078] "
             "(Table 4-1 gives none).")
 
 
@@ -267,8 +262,9 @@ def _sections(results: pd.DataFrame, stats: pd.DataFrame, frames: list[int]) -> 
                 f"the thesis's averages (29% and 67%): S_A = {int(best['S_A (B)'])} B, S_f = {int(best['S_f (B)'])} B, "
                 f"Z = {int(best['Z (B)'])} B, giving {best['vs R-buffer mean']:.0%} and {best['vs WF mean']:.0%}.")
         sections_needed = select(results, variant="tfss")["stat.sections"].max()
-        if best["S_A (B)"] < 4 and sections_needed == sections_needed:
-            text += (f" A {int(best['S_A (B)'])}-byte address reaches {256 ** int(best['S_A (B)']):,} sections; the runs need "
+        if best["S_A (B)"] < 4 and pd.notna(sections_needed):
+            address = int(best["S_A (B)"])
+            text += (f" A {address}-byte address reaches {256 ** address:,} sections; the runs need "
                      f"up to {sections_needed:,.0f}.")
         if (sens["lowest"] < 0).all():
             text += (" Under every choice the lowest reduction against R-buffer is negative: on some frame and "
@@ -284,7 +280,8 @@ def _sections(results: pd.DataFrame, stats: pd.DataFrame, frames: list[int]) -> 
     if mem:
         sections.append(Section("Figures 4-3 and 4-5: memory per frame",
                                 "Table 4-2's totals per frame (S_A = 4 B, S_f = 16 B, Z = 4 B); TFSS+LZE is the "
-                                "smallest section size run for its L_num that drops no fragment.", chart=pd.DataFrame(mem),
+                                "smallest section size run for its L_num that drops no fragment.",
+                                chart=pd.DataFrame(mem),
                                 chart_ylabel="memory (MiB)"))
     reduction = _chart(frames, [*[(f"vs R-buffer, TFSS({n})", lambda f, n=n: 100 * (1 - tfss(results, f, n)
                                                                                / rbuf(results, f))) for n in LNUMS],
@@ -328,8 +325,8 @@ def _summary(results: pd.DataFrame, frames: list[int]) -> str:
     rb, w = reductions(results, frames)
     if not rb:
         return "The experiment ran none of the comparison's default configurations."
-    text = (f"On the {len(frames)} frames run, with S_A = 4 B, S_f = 16 B and Z = 4 B, TFSS saves {_mean(rb):.0%} of "
-            f"R-buffer's memory on average (thesis 29%) and {_mean(w):.0%} of Weight-Factor's (thesis 67%).")
+    text = (f"On the {len(frames)} frames run, with S_A = 4 B, S_f = 16 B and Z = 4 B, TFSS saves {mean(rb):.0%} of "
+            f"R-buffer's memory on average (thesis 29%) and {mean(w):.0%} of Weight-Factor's (thesis 67%).")
     exact, checked = 0, 0
     for f in frames:
         for variant, params, paper in (("r-buffer", {"fragment_bytes": 16, "depth_bytes": 4}, TIME_4_3_2[f][0]),

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from gpusim.papers.base import NOT_MODELLED, Comparison, PaperRow, guarded, one, select
+from gpusim.papers.base import NOT_MODELLED, Comparison, PaperRow, fps, guarded, one, select
 
 DATASETS = (("Dragon", "871k", "like-dragon", 1), ("Powerplant", "12.7M", "like-powerplant", 8),
             ("Lucy", "28.0M", "like-lucy-28m", 14))
@@ -31,9 +31,8 @@ TABLE_2 = ((1.0, "0.3M", 17), (1.5, "1.0M", 6), (6.0, "4.3M", 3), (12.0, "8.7M",
 
 
 def _fps(results: pd.DataFrame, scene: str, mode: str, k: int) -> float:
-    """Frames per second at the GPU's clock: 10^6 over the full level's microseconds."""
     params = {"max_passes": k} if mode == "MP" else {"k": k}
-    return 1e6 / one(results, "microseconds", scene=scene, variant=MODES[mode], fidelity="full", **params)
+    return fps(results, scene=scene, variant=MODES[mode], **params)
 
 
 def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:

@@ -68,7 +68,8 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
             ax.step(xs, ys, where="post", color="black", linewidth=1.0, alpha=0.7, zorder=2, label="Pareto front")
         ax.set_xscale("log")
         axes_labels.append((ax, labels))
-        ax.set_xlabel("cycles (thesis model)" if level == "thesis" else f"simulated cycles ({level} level, shader clock)")
+        ax.set_xlabel("cycles (thesis model)" if level == "thesis"
+                      else f"simulated cycles ({level} level, shader clock)")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.25)
     handles, labels = fig.axes[0].get_legend_handles_labels()

@@ -90,10 +90,10 @@ def pareto(points: pd.DataFrame, x: str, y: str) -> pd.DataFrame:
     return ordered.loc[keep]
 
 
-def fidelity_errors(results: pd.DataFrame) -> pd.DataFrame:
+def fidelity_errors(labelled: pd.DataFrame) -> pd.DataFrame:
     """One row per finished analytic or sampled run that has a finished ``full`` run of the same setting
-    and configuration: its cycles, the full level's, the relative cycle error, and both wall times."""
-    labelled = with_labels(results)
+    and configuration: its cycles, the full level's, the relative cycle error, and both wall times.
+    ``labelled`` is the results table with :func:`with_labels`' columns."""
     ok = labelled[labelled["status"] == "ok"]
     full = ok[ok["fidelity"] == "full"].set_index(["setting", "config"])
     rows = []
@@ -126,10 +126,9 @@ def fidelity_summary(errors: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["fidelity", "runs", "median_abs_error", "max_abs_error", "median_speedup"])
 
 
-def one_per_functional(results: pd.DataFrame) -> pd.DataFrame:
+def one_per_functional(labelled: pd.DataFrame) -> pd.DataFrame:
     """One finished run per scene and configuration (footprint, accesses and image do not depend on the
-    GPU or level): the first in grid order."""
-    labelled = with_labels(results)
+    GPU or level): the first in grid order. ``labelled`` is the results table with :func:`with_labels`' columns."""
     ok = labelled[labelled["status"] == "ok"]
     return ok.drop_duplicates("functional", keep="first")
 
