@@ -446,3 +446,29 @@ def test_report_of_a_functional_only_sweep(tmp_path):
     text = write_report(tmp_path / "out").read_text()
     assert "No run has simulated cycles" in text and "No timed run." in text
     assert "## Scheme statistics" in text and "invalid_pixels" in text
+
+
+def test_whole_numbers_stay_whole_and_resolved_toml_runs_again(tmp_path, monkeypatch):
+    shutil.copy(ROOT / "configs" / "scenes" / "default.toml", tmp_path / "myscene.toml")
+    path = write(tmp_path / "e.toml", 'scenes = ["myscene.toml"]\nsize = "24x20"\nfidelity = ["none", "analytic"]\n'
+                                      '[schemes.alpha-blend]\n[schemes.kbuffer]\nk = [2, 4]\n')
+    out = tmp_path / "out"
+    run_experiment(load_experiment(str(path)), out, workers=1, quiet=True)
+    t = table(out)
+    assert str(t["k"].dtype) == "Int64" and str(t["cycles"].dtype) == "Int64"
+    written = pd.read_csv(out / "results.csv", dtype=str)           # as the CSV spells them: 4, not 4.0
+    assert written["k"].dropna().tolist() == ["2", "2", "4", "4"] and not written["cycles"].str.contains(r"\.").any()
+    monkeypatch.chdir(out)                                        # relative paths were made absolute
+    again = load_experiment("resolved.toml")
+    assert len(expand(again)) == len(t)
+
+
+def test_report_images_use_each_traces_own_reference(tmp_path):
+    from gpusim.report.experiment import write_report
+    path = write(tmp_path / "e.toml", 'scenes = ["default"]\nsize = "24x20"\nfidelity = ["none"]\n'
+                                      '[scene-set]\n"screen.background" = [[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]\n'
+                                      '[schemes.alpha-blend]\n')
+    run_experiment(load_experiment(str(path)), tmp_path / "out", workers=1, quiet=True)
+    text = write_report(tmp_path / "out").read_text()
+    images = sorted(p.name for p in (tmp_path / "out" / "figures").glob("images-*.png"))
+    assert len(images) == 2 and text.count("![images of default screen.background=") == 2
