@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gpusim.schemes.depthkey import EMPTY, colour24, colour24_rgb, depth_key, key_depth, packed_depth
+from gpusim.schemes.common.depthkey import EMPTY, colour24, colour24_rgb, depth_key, key_depth, packed_depth
 
 ONE_BITS = 0x3F800000   # bit pattern of 1.0f
 

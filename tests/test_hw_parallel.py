@@ -10,9 +10,9 @@ from gpusim.hw import FIDELITIES, load_gpu
 from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine, NoProgress
 from gpusim.hw.parallel import plan_shares
+from gpusim.opplan import OpPlan, Pass, layout_bases
 from gpusim.scene import load_scene, trace_scene
 from gpusim.schemes import make_scheme
-from gpusim.schemes.opstream import OpPlan, Pass, layout_bases
 
 from test_hw_units import SIMPLE
 

@@ -9,7 +9,7 @@ from gpusim.errors import ConfigError, GpusimError
 from gpusim.hw import load_gpu
 from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine, NoProgress
-from gpusim.schemes.opstream import OpPlan, Pass, layout_bases
+from gpusim.opplan import OpPlan, Pass, layout_bases
 
 # one SM issuing a warp instruction per cycle, one partition, no interconnect
 SIMPLE = ["core.sms=1", "core.lanes_per_sm=32", "core.instructions_per_op=0", "core.pipeline_latency=0",

@@ -13,8 +13,8 @@ from gpusim.hw import thesis_timing
 from gpusim.metrics import composite_exact, image_error
 from gpusim.scene import load_scene, trace_scene
 from gpusim.schemes import make_scheme
-from gpusim.schemes.leading_zeros import colour_bits
-from gpusim.schemes.weights import premultiply, unorm
+from gpusim.schemes.common.leading_zeros import colour_bits
+from gpusim.schemes.common.weights import premultiply, unorm
 
 FRAMES = (60, 120, 180, 240, 300, 360, 420, 480)
 # seed 003 Table 4-1: (all fragments, transparent fragments, N_1..N_5)

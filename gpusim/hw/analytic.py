@@ -36,7 +36,7 @@ from gpusim.hw.machine import flush_cycles
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.units import address_ids
 from gpusim.metrics.composite import run_starts
-from gpusim.schemes.opstream import OPS, _Range
+from gpusim.opplan import OPS, ThreadRange
 
 
 def _distinct(a: np.ndarray) -> int:
@@ -104,7 +104,7 @@ def analytic_timing(result, work, gpu) -> dict:
                                           #                     warp max))]
     for g in plan.groups:
         n = len(g.thread)
-        thread = np.arange(n) if isinstance(g.thread, _Range) else g.thread
+        thread = np.arange(n) if isinstance(g.thread, ThreadRange) else g.thread
         op = OPS.index(g.op)
         cls, produces = int(OP_CLASS[op]), bool(OP_PRODUCES[op])
         if g.pass_fn is not None:

@@ -32,8 +32,8 @@ import numpy as np
 from gpusim.errors import GpusimError
 from gpusim.hw.units import div, mod
 from gpusim.metrics.composite import run_starts
-from gpusim.schemes.arrays import rank_in_runs
-from gpusim.schemes.opstream import DEFAULT_MAX_OPS, OPS, OpPlan, _Range
+from gpusim.opplan import DEFAULT_MAX_OPS, OPS, OpPlan, ThreadRange
+from gpusim.schemes.common.arrays import rank_in_runs
 
 MEM, ATOMIC, ROP, SCOREBOARD = 0, 1, 2, 3
 UNIT_CLASSES = ("memory", "atomic", "rop", "scoreboard")
@@ -270,7 +270,7 @@ def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     n = len(g.thread)
     count = g.count
     i = np.arange(n, dtype=np.int64)
-    threads = i if isinstance(g.thread, _Range) else g.thread
+    threads = i if isinstance(g.thread, ThreadRange) else g.thread
     if int(count.min()) == 1 and int(count.max()) == 1:
         seq = np.broadcast_to(np.zeros(1, np.int64), (n,))      # no allocation: every op is the first
         single = True

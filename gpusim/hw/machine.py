@@ -55,7 +55,7 @@ from gpusim.hw.parallel import plan_shares, run_shares
 from gpusim.hw.rop import RopUnits
 from gpusim.hw.scoreboard import Scoreboard
 from gpusim.hw.units import Signal
-from gpusim.schemes.opstream import OPS
+from gpusim.opplan import OPS
 
 
 class NoProgress(GpusimError):

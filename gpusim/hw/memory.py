@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
-from gpusim.schemes.opstream import OPS
+from gpusim.opplan import OPS
 from gpusim.hw.units import FP, Unit, cycles, div, fp_costs, mod
 from gpusim.metrics.composite import run_starts
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from gpusim.hw.lower import ROP, Program
 from gpusim.hw.units import FP, Signal, Unit, UnitStat, fp_cost
-from gpusim.schemes.opstream import OPS
+from gpusim.opplan import OPS
 
 PROGRAM_BLEND = OPS.index("program_blend")
 

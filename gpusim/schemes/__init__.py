@@ -2,7 +2,7 @@
 
 Importing this package registers every scheme; select one by its CLI name with
 :func:`make_scheme`. See gpusim.schemes.base for the interface and
-gpusim.schemes.opstream for the operations a scheme reports.
+gpusim.opplan for the operations a scheme reports.
 """
 
 from gpusim.schemes import (  # noqa: F401  (importing registers each scheme)

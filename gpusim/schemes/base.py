@@ -17,8 +17,8 @@ import numpy as np
 from gpusim.config import build, describe, to_dict
 from gpusim.errors import ConfigError
 from gpusim.metrics.composite import composite_runs
+from gpusim.schemes.common.storage import effective_alpha, store_colour
 from gpusim.schemes.result import SchemeResult
-from gpusim.schemes.storage import effective_alpha, store_colour
 from gpusim.trace import FragmentTrace
 
 #: name -> scheme class; filled by @register at import of gpusim.schemes.

@@ -37,12 +37,12 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.errors import GpusimError
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.fold import fold
-from gpusim.schemes.groups import PixelGroups, segment_running_min_before
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.fold import fold
+from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
+from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, rounder
 from gpusim.schemes.result import SchemeResult, Stat, Structure
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, rounder
 
 OpaqueMode = Literal["prepass", "blend"]
 REVEALAGE_BYTES = {"r8": 1, "r16f": 2, "r32f": 4}

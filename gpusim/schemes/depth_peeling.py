@@ -33,11 +33,11 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
-from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 
 Termination = Literal["known-layers", "occlusion-query"]
 

@@ -10,7 +10,7 @@ Passes:
    k >= layers is dropped (the counter still counts it).
 3. ``resolve`` (one thread per pixel): load the counter, load min(n, layers)
    depths and colours into registers, sort them there (``sort``: insertion or
-   bitonic, see gpusim.schemes.sorting) and composite front to back.
+   bitonic, see gpusim.schemes.common.sorting) and composite front to back.
 
 Footprint: ``counter`` (4 B per pixel), ``depth_array`` (``layers`` x 4 B per
 pixel), ``colour_array`` (``layers`` x the colour format per pixel). FreePipe
@@ -26,13 +26,13 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
-from gpusim.schemes.arrays import Layout, entry_index
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
-from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.arrays import Layout, entry_index
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.sorting import sort_runs
+from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.sorting import sort_runs
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat
 
 
 @register("freepipe-abuffer")

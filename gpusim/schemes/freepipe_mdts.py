@@ -39,14 +39,14 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.errors import GpusimError
-from gpusim.schemes.arrays import (Layout, count_before_in_pixel, entry_index, pixel_key, rank_in_runs,
-                                   smallest_per_pixel)
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_image, register
-from gpusim.schemes.depthkey import EMPTY, colour24, colour24_rgb, packed_depth
-from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.arrays import (Layout, count_before_in_pixel, entry_index, pixel_key, rank_in_runs,
+                                          smallest_per_pixel)
+from gpusim.schemes.common.depthkey import EMPTY, colour24, colour24_rgb, packed_depth
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
 
 
 @register("freepipe-mdts")

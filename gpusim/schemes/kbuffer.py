@@ -20,7 +20,7 @@ Modes:
   otherwise fragments are composited out of order (``misordered_pairs``).
 
 Heuristics of section 3.2, applied to the trace first: ``order = centroid``
-sorts primitives front to back by centroid depth (see gpusim.schemes.reorder);
+sorts primitives front to back by centroid depth (see gpusim.schemes.common.reorder);
 ``batch = N`` splits the primitives into batches of N with a pipeline flush
 (a ``flush`` pass with no memory operations) between. Both leave this
 functional result unchanged (peel) or improve it (sort-blend, by ordering);
@@ -36,7 +36,7 @@ Hardware (``hw``, section 3.1):
   reading and writing the pixel's k entries in submission order.
 
 ``extras["rmw_replay"]`` replays the program in the timing model's event order
-(gpusim.schemes.kbuffer_replay) so the timed image shows the hazards' artifacts.
+(gpusim.schemes.common.kbuffer_replay) so the timed image shows the hazards' artifacts.
 """
 
 from __future__ import annotations
@@ -47,15 +47,15 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
-from gpusim.schemes.arrays import entry_index, smallest_per_pixel
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
-from gpusim.schemes.depth_filter import emit_order
-from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.kbuffer_replay import make_replay
-from gpusim.schemes.opstream import OpPlan, Pass
-from gpusim.schemes.reorder import batch_index, batch_primitives, centroid_order, permuted
+from gpusim.schemes.common.arrays import entry_index, smallest_per_pixel
+from gpusim.schemes.common.depth_filter import emit_order
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.kbuffer_replay import make_replay
+from gpusim.schemes.common.reorder import batch_index, batch_primitives, centroid_order, permuted
+from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 
 FRAMEBUFFER_BYTES = 16   # RGBA32F off-screen framebuffer (one MRT attachment)
 

@@ -12,10 +12,10 @@ as a 32-bit word of 22 depth bits over 10 index bits (ties: the triangle listed
 first, i.e. submitted first). Window depth is affine in screen space on a
 planar triangle, so the depth at the centroid equals the mean of the samples'
 depths; the 22 bits are the top of the float's ordered bit pattern
-(gpusim.schemes.depthkey). Each pixel then receives its samples in that order
+(gpusim.schemes.common.depthkey). Each pixel then receives its samples in that order
 and passes them through a depth filter, a fixed-size priority queue of
 ``depth_filter`` entries from which the nearest sample falls out and is
-blended front to back (gpusim.schemes.depth_filter).
+blended front to back (gpusim.schemes.common.depth_filter).
 
 A pixel is **invalid** (the paper's count) when a sample falls out nearer than
 one already blended: the two-stage sort failed there. The true image error
@@ -41,13 +41,13 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.metrics.composite import composite_runs, runs_by_length
-from gpusim.schemes.arrays import rank_in_runs
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.depth_filter import emit_order
-from gpusim.schemes.depthkey import depth_key
-from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.lucid_bins import Grid, grouped, pairs
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.arrays import rank_in_runs
+from gpusim.schemes.common.depth_filter import emit_order
+from gpusim.schemes.common.depthkey import depth_key
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.lucid_bins import Grid, grouped, pairs
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
 TRI_DATA_BYTES = 84          # 4 (normal) + 32 (barycentric edges) + 16 (depth edge, ids) + 32 (scanline)

@@ -9,7 +9,7 @@ but not its accesses, so the model issues none).
 Passes:
 
 1. ``clear``: the second z-buffer is set to the nearest depth.
-2. ``capture`` (phase 1, gpusim.schemes.early_z): opaque fragments go to the
+2. ``capture`` (phase 1, gpusim.schemes.common.early_z): opaque fragments go to the
    z-buffer and frame buffer; a transparent fragment that passes early z is
    appended to the FIFO and raises its pixel's second-z to the furthest
    stored depth (one ROP depth test).
@@ -37,14 +37,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.config import param
-from gpusim.schemes.arrays import pixel_key
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
-from gpusim.schemes.fold import fold
-from gpusim.schemes.groups import PixelGroups, distinct_rank_in_runs
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.arrays import pixel_key
+from gpusim.schemes.common.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
+from gpusim.schemes.common.fold import fold
+from gpusim.schemes.common.groups import PixelGroups, distinct_rank_in_runs
+from gpusim.schemes.common.weights import unorm_rounder
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.weights import unorm_rounder
 
 
 def far_rank(pix: np.ndarray, key: np.ndarray, idx: np.ndarray) -> np.ndarray:

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from gpusim.schemes.opstream import DEFAULT_MAX_OPS, OpPlan, OpStream, layout_bases
+from gpusim.opplan import DEFAULT_MAX_OPS, OpPlan, OpStream, layout_bases
 
 
 @dataclass(frozen=True)
@@ -105,5 +105,5 @@ class SchemeResult:
                             {s.name: s.allocated_bytes for s in self.structures})
 
     def opstream(self, max_ops: int = DEFAULT_MAX_OPS) -> OpStream:
-        """Expand the plan into one row per memory operation (see gpusim.schemes.opstream)."""
+        """Expand the plan into one row per memory operation (see gpusim.opplan)."""
         return self.plan.expand(self.bases(), max_ops)

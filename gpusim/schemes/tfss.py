@@ -12,7 +12,7 @@ Structures (Table 4-2, with N_S the number of sections actually allocated):
 * ``length_table`` (with leading-0s elimination, section 3.3): one entry per
   section holding ``l_num`` colour lengths.
 
-Passes (phase 1 and 2 as in gpusim.schemes.early_z: opaque fragments go to the
+Passes (phase 1 and 2 as in gpusim.schemes.common.early_z: opaque fragments go to the
 z-buffer and frame buffer, never into the TFSS; a transparent fragment behind
 the nearest opaque one so far is discarded on arrival; one occluded later is
 read but not blended):
@@ -30,13 +30,13 @@ read but not blended):
 3. ``read`` (Figure 3-9): per pixel, read the SSA entry; per section of the
    chain read the NSA entry (simultaneously with the section, section 3.2.3.2)
    and each fragment in it; test them against the z-buffer (phase 2) and
-   blend with the weight-factor equations (gpusim.schemes.weights) over the
+   blend with the weight-factor equations (gpusim.schemes.common.weights) over the
    frame buffer's opaque colour. ``read_scan = "occupied"`` visits the pixels
    that have a start section (section 4.3.2 counts one SSA look-up per pixel
    with transparent fragments); ``"all"`` reads every SSA entry as Figure 3-9
    draws it.
 
-Leading-0s elimination (gpusim.schemes.leading_zeros) compresses each stored
+Leading-0s elimination (gpusim.schemes.common.leading_zeros) compresses each stored
 fragment's colour; a fragment then takes ``fragment_bytes`` minus the bits
 saved, and a section holds fragments while both its ``l_num`` slots and its
 ``section_bytes`` last. Fragments that had to open a section early
@@ -53,17 +53,17 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
-                                    storage_bytes)
-from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.leading_zeros import LzeMode, length_field_bits
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
+                                           storage_bytes)
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.leading_zeros import LzeMode, length_field_bits
+from gpusim.schemes.common.sections import SectionIndex, place, read_runs
+from gpusim.schemes.common.storage import DEPTH_BYTES
+from gpusim.schemes.common.weights import (Ties, check_fragment_bytes, stored_colours, unorm_rounder,
+                                           weighted_image)
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.sections import SectionIndex, place, read_runs
-from gpusim.schemes.storage import DEPTH_BYTES
-from gpusim.schemes.weights import (Ties, check_fragment_bytes, stored_colours, unorm_rounder,
-                                    weighted_image)
 
 @register("tfss")
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ fragments) plus N_A dynamically allocated sections for pixels with more than
 ``d_avg`` fragments; ``pointer_memory``, one S_A pointer per section
 (S_A x (W x H + N_A)), NULL or the next section's index.
 
-Phases 1 and 2 as in gpusim.schemes.early_z. ``capture``: a stored fragment
+Phases 1 and 2 as in gpusim.schemes.common.early_z. ``capture``: a stored fragment
 follows its pixel's pointer chain from section i (one pointer read per full
 section passed) and writes itself in the first section with room; a pixel
 needing another section takes the next dynamic one (indices from W x H up, in
@@ -15,7 +15,7 @@ submission order), links it from the last pointer and sets its own pointer to
 NULL. ``clear`` sets the W x H static pointers to NULL. ``read`` (Figure 2-6):
 per pixel with fragments, read each section's pointer (simultaneously with the
 section, seed 003 section 4.3.2) and each fragment once; weight factors by
-Eq. 2-4 (gpusim.schemes.weights) over the frame buffer's opaque colour.
+Eq. 2-4 (gpusim.schemes.common.weights) over the frame buffer's opaque colour.
 """
 
 from __future__ import annotations
@@ -26,16 +26,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.config import param
+from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
-                                    storage_bytes)
-from gpusim.schemes.groups import PixelGroups
-from gpusim.schemes.opstream import OpPlan, Pass
+from gpusim.schemes.common.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
+                                           storage_bytes)
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.sections import SectionIndex, place, read_runs
+from gpusim.schemes.common.storage import DEPTH_BYTES
+from gpusim.schemes.common.weights import (Ties, check_fragment_bytes, stored_colours, unorm_rounder,
+                                           weighted_image)
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
-from gpusim.schemes.sections import SectionIndex, place, read_runs
-from gpusim.schemes.storage import DEPTH_BYTES
-from gpusim.schemes.weights import (Ties, check_fragment_bytes, stored_colours, unorm_rounder,
-                                    weighted_image)
 
 
 @register("weight-factor")

@@ -8,7 +8,7 @@ larger than a whole section can never be stored (``unfit``).
 :func:`place` returns, for every fragment it is given, its position in the
 pixel's chain of sections and its slot inside that section. With a bit budget
 the packing is greedy and sequential per pixel; it is vectorised over pixels
-with one step per arrival rank (see gpusim.schemes.fold).
+with one step per arrival rank (see gpusim.schemes.common.fold).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.arrays import rank_in_runs
+from gpusim.schemes.common.arrays import rank_in_runs
 
 
 @dataclass(eq=False)

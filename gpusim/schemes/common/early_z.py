@@ -26,10 +26,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.metrics.composite import run_starts
-from gpusim.schemes.groups import PixelGroups, segment_running_min_before
-from gpusim.schemes.opstream import OpPlan
+from gpusim.opplan import OpPlan
+from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
+from gpusim.schemes.common.storage import DEPTH_BYTES
 from gpusim.schemes.result import Stat, Structure
-from gpusim.schemes.storage import DEPTH_BYTES
 
 _FAR = np.uint64(1) << np.uint64(32)     # "no opaque fragment yet": behind every key
 

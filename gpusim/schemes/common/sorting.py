@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.metrics.composite import run_starts
-from gpusim.schemes.arrays import pixel_key
+from gpusim.schemes.common.arrays import pixel_key
 
 _PAD = np.uint64(1) << np.uint64(40)
 

@@ -1,6 +1,8 @@
-"""The OpStream: the memory operations a scheme issues, the seam to the timing model.
+"""The OpPlan: the memory operations a scheme issues, the seam between schemes and hardware.
 
-A scheme describes its operations as an :class:`OpPlan`: a list of
+This is the one module both sides import: gpusim.schemes builds an
+:class:`OpPlan`, gpusim.hw lowers it to timed instructions, and neither imports
+the other. A scheme describes its operations as an :class:`OpPlan`: a list of
 :class:`OpGroup` s, each "every thread in this set issues ``count`` operations
 ``op`` on ``structure`` at these byte offsets", added in program order. The
 plan gives the access counts per structure and operation without expanding
@@ -8,6 +10,12 @@ anything (so a functional run stays fast), and :meth:`OpPlan.expand` turns it
 into an :class:`OpStream`, one row per operation, only when a consumer (the
 timing model, a test) asks for it. Counts and stream come from the same groups,
 so they cannot disagree.
+
+A group's threads are an array of ids or a :class:`ThreadRange` (0..n-1, never
+materialised). Every consumer expands a group the same way:
+:meth:`OpGroup.expand_ops` gives each operation's thread index and sequence
+number, :meth:`OpGroup.thread_ids` the thread ids, :meth:`OpGroup.pass_of` the
+pass of each operation.
 
 Rows are ordered by pass, then thread, then program order inside the thread.
 A thread is a fragment (geometry passes, numbered in submission order after
@@ -103,6 +111,42 @@ class OpGroup:
     def total(self) -> int:
         return int(self.count.sum())
 
+    def expand_ops(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(i, seq)`` of every operation, in thread then program order.
+
+        ``i`` is the index into ``thread`` of the operation's thread; ``seq`` its
+        number among that thread's operations of this group (0, 1, ...). When
+        every count is 1, ``i`` is ``arange(n)`` and ``seq`` a broadcast zero
+        (no allocation).
+        """
+        n = len(self.thread)
+        count = self.count
+        i = np.arange(n, dtype=np.int64)
+        if n and int(count.min()) == 1 and int(count.max()) == 1:
+            return i, np.broadcast_to(np.zeros(1, np.int64), (n,))
+        i = np.repeat(i, count)
+        first = np.cumsum(count) - count
+        seq = np.arange(len(i), dtype=np.int64) - np.repeat(first, count)
+        return i, seq
+
+    def thread_ids(self) -> np.ndarray:
+        """The thread ids as an array (``arange`` for a :class:`ThreadRange`)."""
+        if isinstance(self.thread, ThreadRange):
+            return np.arange(len(self.thread), dtype=np.int64)
+        return self.thread
+
+    def pass_of(self, i: np.ndarray, seq: np.ndarray) -> np.ndarray | int:
+        """The pass of each operation ``(i, seq)`` (from :meth:`expand_ops`).
+
+        ``pass_fn(i, seq)`` when the group has one, else the scalar ``pass_index``,
+        else the pass of each operation's thread, ``pass_index[i]``.
+        """
+        if self.pass_fn is not None:
+            return self.pass_fn(i, seq)
+        if np.isscalar(self.pass_index):
+            return self.pass_index
+        return self.pass_index[i]
+
 
 @dataclass
 class OpPlan:
@@ -127,7 +171,7 @@ class OpPlan:
         if structure not in self.structures:
             raise ValueError(f"operation on unallocated structure {structure!r}")
         if isinstance(thread, (int, np.integer)):       # threads 0..thread-1, made only on expansion
-            thread = _Range(int(thread))
+            thread = ThreadRange(int(thread))
         else:
             thread = np.asarray(thread, dtype=np.int64)
         count = np.broadcast_to(np.asarray(count, dtype=np.int64), (len(thread),))
@@ -172,18 +216,10 @@ class OpPlan:
                                                   "bytes", "dep")}
         for g in self.groups:
             n = g.total
-            thread = np.arange(len(g.thread)) if isinstance(g.thread, _Range) else g.thread
-            i = np.repeat(np.arange(len(g.thread)), g.count)
-            first = np.cumsum(g.count) - g.count
-            seq = np.arange(n, dtype=np.int64) - np.repeat(first, g.count)
+            i, seq = g.expand_ops()
             offset = np.asarray(g.offset(i, seq), dtype=np.uint64)
-            if g.pass_fn is not None:
-                cols["pass_index"].append(np.asarray(g.pass_fn(i, seq), dtype=np.uint32))
-            elif np.isscalar(g.pass_index):
-                cols["pass_index"].append(np.full(n, g.pass_index, np.uint32))
-            else:
-                cols["pass_index"].append(g.pass_index[i].astype(np.uint32))
-            cols["thread"].append(thread[i])
+            cols["pass_index"].append(np.broadcast_to(np.asarray(g.pass_of(i, seq), dtype=np.uint32), (n,)))
+            cols["thread"].append(g.thread_ids()[i])
             cols["op"].append(np.full(n, OPS.index(g.op), np.uint8))
             cols["structure"].append(np.full(n, self.structures.index(g.structure), np.uint8))
             cols["address"].append(offset + np.uint64(bases[g.structure]))
@@ -198,7 +234,7 @@ class OpPlan:
                         bases=dict(bases))
 
 
-class _Range:
+class ThreadRange:
     """Threads 0..n-1 without materialising them (a clear pass over millions of entries)."""
 
     def __init__(self, n: int):

@@ -26,8 +26,8 @@ from typing import Literal
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.leading_zeros import colour_bits
-from gpusim.schemes.storage import DEPTH_BYTES
+from gpusim.schemes.common.leading_zeros import colour_bits
+from gpusim.schemes.common.storage import DEPTH_BYTES
 
 Ties = Literal["arrival", "eq4"]
 
@@ -101,7 +101,7 @@ class StoredColours:
 
 
 def stored_colours(rgba: np.ndarray, bits: int, fragment_bits: int, lze: str) -> StoredColours:
-    """Quantise to ``bits`` per channel, compress (gpusim.schemes.leading_zeros), give the blended values back."""
+    """Quantise to ``bits`` per channel, compress (gpusim.schemes.common.leading_zeros), return the blended values."""
     top = np.float32((1 << bits) - 1)
     c = unorm(rgba[:, :3], bits)
     a = unorm(rgba[:, 3], bits)

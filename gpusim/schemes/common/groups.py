@@ -11,9 +11,9 @@ from functools import cached_property
 
 import numpy as np
 
-from gpusim.schemes.arrays import pixel_key, rank_in_runs
-from gpusim.schemes.depthkey import depth_key
-from gpusim.schemes.storage import effective_alpha
+from gpusim.schemes.common.arrays import pixel_key, rank_in_runs
+from gpusim.schemes.common.depthkey import depth_key
+from gpusim.schemes.common.storage import effective_alpha
 from gpusim.trace import FragmentTrace
 
 
@@ -32,7 +32,7 @@ class PixelGroups:
 
     @cached_property
     def key(self) -> np.ndarray:
-        """Ordered uint32 depth key of each fragment (gpusim.schemes.depthkey)."""
+        """Ordered uint32 depth key of each fragment (gpusim.schemes.common.depthkey)."""
         return depth_key(self.trace.z)
 
     @cached_property
