@@ -1,6 +1,7 @@
 """Timing-model throughput and the relative results on a larger scene.
 
     .venv/bin/python benchmarks/bench_timing.py [--size 640] [--report reports/timing/index.md]
+    .venv/bin/python benchmarks/bench_timing.py --against 8a9227e      # speed against an older engine
 
 1. Throughput: the A-buffer scheme (freepipe-abuffer) on the built-in
    ``default`` scene at SIZE x SIZE (640: about 1.2 million fragments) on the
@@ -19,7 +20,11 @@
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -81,6 +86,56 @@ def throughput(size: int, repeat: int = 3) -> bool:
     return full_rate >= TARGET and ratio >= 20
 
 
+#: run in a child process against either source tree: the full level's best wall time on the throughput trace
+CHILD = """
+import json, sys, time
+from gpusim.hw import FIDELITIES, load_gpu
+from gpusim.scene import load_scene, trace_scene
+from gpusim.schemes import make_scheme
+size, repeat = int(sys.argv[1]), int(sys.argv[2])
+trace = trace_scene(*load_scene("default", [f"screen.width={size}", f"screen.height={size}"]))
+gpu = load_gpu("gtx280", ["runner.workers=1"])
+result = make_scheme("freepipe-abuffer", {}).run(trace)
+best, cycles = float("inf"), None
+for _ in range(repeat):
+    start = time.perf_counter()
+    rec, _ = FIDELITIES["full"](result, trace, gpu)
+    best, cycles = min(best, time.perf_counter() - start), rec["cycles"]
+print(json.dumps({"seconds": best, "cycles": cycles, "fragments": len(trace)}))
+"""
+
+
+def against(rev: str, size: int, repeat: int, rounds: int = 2) -> bool:
+    """The full level here and at git revision ``rev`` (checked out in a temporary worktree), side by side:
+    child processes alternate between the two trees, each the best of ``repeat`` runs on one CPU
+    (``runner.workers = 1``); the ratio of their speeds. Target: at least 0.7x the speed of the engine before
+    the simpy rebuild."""
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "baseline"
+        subprocess.run(["git", "-C", str(root), "worktree", "add", "--detach", "-q", str(tree), rev], check=True)
+        try:
+            best = {"here": float("inf"), rev: float("inf")}
+            got = {}
+            for _ in range(rounds):
+                for name, path in (("here", root), (rev, tree)):
+                    env = dict(os.environ, PYTHONPATH=str(path))
+                    out = subprocess.run([sys.executable, "-c", CHILD, str(size), str(repeat)], env=env, cwd=path,
+                                         capture_output=True, text=True, check=True)
+                    got[name] = json.loads(out.stdout.strip().splitlines()[-1])
+                    best[name] = min(best[name], got[name]["seconds"])
+        finally:
+            subprocess.run(["git", "-C", str(root), "worktree", "remove", "--force", str(tree)], check=False)
+    n = got["here"]["fragments"]
+    for name in best:
+        print(f"full level {name:>10s}: {best[name]:6.2f} s  {n / best[name]:12,.0f} fragments/s  "
+              f"cycles {got[name]['cycles']:,}")
+    ratio = best[rev] / best["here"]
+    print(f"speed here / {rev}: {ratio:.2f}x (target >= 0.7x); cycles "
+          + ("identical" if got["here"]["cycles"] == got[rev]["cycles"] else "DIFFER"))
+    return ratio >= 0.7
+
+
 def relative(size: int, report: Path | None) -> None:
     gpu = load_gpu("gtx280")
     lines = [f"# Timing model: relative results on nested-spheres at {size}x{size}", ""]
@@ -130,7 +185,11 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="runs of each level; the best counts")
     ap.add_argument("--relative-size", type=int, default=256)
     ap.add_argument("--report", type=Path, default=Path("reports/timing/index.md"))
+    ap.add_argument("--against", metavar="REV", help="only compare the full level's speed with git revision REV "
+                    "(e.g. the commit before the simpy rebuild)")
     args = ap.parse_args(argv)
+    if args.against:
+        return 0 if against(args.against, args.size, args.repeat) else 1
     ok = throughput(args.size, args.repeat)
     relative(args.relative_size, args.report)
     return 0 if ok else 1

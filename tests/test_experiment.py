@@ -235,7 +235,8 @@ def test_stats_table_is_long_form_and_agrees_with_the_row(small_run):
     assert footprint == row["footprint_bytes"]
     assert mine[(mine["unit"] == "machine") & (mine["stat"] == "cycles")]["value"].iloc[0] == row["cycles"]
     assert mine[mine["stat"] == "pass_cycles"]["value"].sum() == row["cycles"]
-    assert {"dram"} <= set(mine["unit"]) and mine[mine["unit"] == "dram"]["labels"].str.startswith("instance=").all()
+    assert {"memory.dram"} <= set(mine["unit"])
+    assert mine[mine["unit"] == "memory.dram"]["labels"].str.startswith("instance=").all()
 
 
 def test_each_run_has_its_files(small_run):

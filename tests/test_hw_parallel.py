@@ -60,7 +60,7 @@ def test_shares_stay_serial_where_they_cannot_gain_or_must_not(small):
     assert len(plan_shares(machine_for(result, small, load_gpu("gtx280")))) == 1
     # shares are balanced: largest passes first, each to the least loaded share
     m = machine_for(result, small, load_gpu("gtx280", ["runner.workers=2"]))
-    weight = [p.instructions for p in m.prog.passes]
+    weight = [p.instructions for p in m.program.passes]
     loads = [sum(weight[i] for i in s) for s in plan_shares(m)]
     assert abs(loads[0] - loads[1]) <= max(weight)
 

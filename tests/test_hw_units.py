@@ -13,7 +13,7 @@ from gpusim.opplan import OpPlan, Pass, layout_bases
 
 # one SM issuing a warp instruction per cycle, one partition, no interconnect
 SIMPLE = ["core.sms=1", "core.lanes_per_sm=32", "core.instructions_per_op=0", "core.pipeline_latency=0",
-          "memory.partitions=1", "memory.interconnect_latency=0", "memory.segment_bytes=32",
+          "memory.partitions=1", "memory.interconnect_latency=0", "coalescer.segment_bytes=32",
           "dram.latency=100", "dram.bytes_per_cycle=32.0", "atomic.latency=50", "atomic.ops_per_cycle=100.0",
           "atomic.same_address_cycles=10", "rop.units=1", "rop.latency=0", "rop.ops_per_cycle=1.0",
           "runner.no_progress_cycles=100000"]
@@ -37,7 +37,7 @@ def test_single_warp_load_timeline():
     plan.add(0, "load", "a", 32, 1, lambda i, s: i * 4, 4)
     cycles, m = simulate(plan, {"a": 128}, 32)
     assert cycles == 104
-    assert m.built_units() == ["dram"]
+    assert m.built_units() == ["core", "coalescer", "dram"]
 
 
 def test_two_warps_on_one_address_serialize():
@@ -46,8 +46,8 @@ def test_two_warps_on_one_address_serialize():
     plan.add(0, "atomic_inc", "c", 64, 1, lambda i, s: i * 0, 4)
     cycles, m = simulate(plan, {"c": 4}, 64)
     assert cycles == 63 * 10 + 50        # last start 630, latency 50
-    assert m.built_units() == ["atomic"]
-    assert m.atomics.summary(cycles)["max_ops_one_address"] == 64
+    assert m.built_units() == ["core", "atomic"]
+    assert m.units["atomic"].summary(cycles)["hottest_address_ops"] == 64
 
 
 def test_bandwidth_bound_stream():
@@ -79,11 +79,11 @@ def test_full_reorder_buffer_stalls_the_core():
     roomy, m1 = simulate(plan, sizes, 64, ["core.sms=2", "rop.reorder_entries=64"])
     # with room for all 32, warp 1 issues its load at cycle 1: done by 102; the ROPs drain at 165
     assert roomy == 165
-    assert m1.rop.summary(roomy)["stalls"] == 0
+    assert m1.units["rop"].summary(roomy)["stalls"] == 0
     tight, m2 = simulate(plan, sizes, 64, ["core.sms=2", "rop.reorder_entries=8"])
     # 8 entries: warp 1 stalls until warp 0's blends commit (placed at cycle 101), its load then ends at 202
     assert tight == 101 + 1 + 100
-    s = m2.rop.summary(tight)
+    s = m2.units["rop"].summary(tight)
     assert s["stalls"] >= 1 and s["max_reorder_occupancy"] == 8
 
 
@@ -96,7 +96,7 @@ def test_stiff_hot_word_and_latency_range_are_exact():
     cycles, m = simulate(plan, {"c": 8}, 10_001, extra)
     assert cycles == 9_999 * 3 + 10_000
     assert isinstance(cycles, int)
-    assert m.atomics.summary(cycles)["max_ops_one_address"] == 10_000
+    assert m.units["atomic"].summary(cycles)["hottest_address_ops"] == 10_000
 
 
 def test_deadlock_fails_with_a_diagnosis():
@@ -145,7 +145,7 @@ def test_scoreboard_serializes_a_pixel():
     plan.add(0, "rmw_write", "k", 64, 1, lambda i, s: i * 0, 4, dep=True)
     cycles, m = simulate(plan, {"k": 4}, 64)
     # each fragment is alone in its warp (one cell) and takes read 1 + 100, write 1 + 100 cycles
-    assert m.scoreboard.summary(cycles)["max_held"] == 1
+    assert m.units["scoreboard"].summary(cycles)["max_held"] == 1
     assert cycles >= 64 * 202
 
 
@@ -171,12 +171,110 @@ def test_presets_load_and_unknown_preset_lists_valid():
 
 
 def test_l2_slice_is_lru_and_write_back():
-    from gpusim.hw.memory import L2Slices
+    from types import SimpleNamespace
+
+    from gpusim.hw.memory.l2 import L2Slice
     gpu = load_gpu("modern", ["l2.size_bytes=256", "l2.line_bytes=128", "l2.ways=2"])     # one set of 2 ways
-    l2 = L2Slices(gpu)
+    l2 = L2Slice(gpu.l2, SimpleNamespace(gpu=gpu, level_after=lambda name: None))
     a, b, c = 0, 1, 2                                  # lines of partition 0, all in its only set
     got = [l2.lookup(0, a, True), l2.lookup(0, b, False), l2.lookup(0, a, False), l2.lookup(0, c, False),
            l2.lookup(0, b, False), l2.lookup(0, a, False)]
     # a (dirty) and b miss; a hits; c evicts b (least recent, clean); b evicts a (dirty: written back)
     assert got == [(False, False), (False, False), (True, False), (False, False), (False, True), (False, False)]
     assert (l2.hits[0], l2.misses[0]) == (1, 5)
+
+
+def test_sm_placement_is_per_pass_and_every_stat_uses_it():
+    # pass A has 1 warp, pass B 3 warps, on 2 SMs: each pass places its warps from SM 0, so SM 0 runs A's warp
+    # and B's warps 0 and 2, SM 1 B's warp 1 (numbering warps across passes would have said 2 and 2)
+    plan = OpPlan([Pass("a", "fullscreen", "pixel"), Pass("b", "fullscreen", "pixel")], ["m"])
+    plan.add(0, "load", "m", 32, 1, lambda i, s: i * 4, 4)
+    plan.add(1, "load", "m", 96, 1, lambda i, s: i * 4, 4)
+    cycles, m = simulate(plan, {"m": 384}, 96, ["core.sms=2"])
+    core = m.units["core"]
+    assert core.values(cycles)["requests"] == [3, 1]
+    assert core.summary(cycles)["utilisation_max"] == pytest.approx(3 / cycles)
+    assert list(core.place(3, 2)) == [0, 1, 0]
+
+
+def test_a_memory_level_added_from_a_test_file():
+    from dataclasses import dataclass
+
+    from gpusim.config import param
+    from gpusim.hw.memory import MemoryLevel
+    from gpusim.hw.unit import FP, Stat, register_unit, unregister_unit
+
+    @dataclass(frozen=True)
+    class ToyConfig:
+        latency: int = param(7, unit="cycles", doc="added to every instruction's requests", min=0)
+
+    class Toy(MemoryLevel):
+        name = "toy"
+        Config = ToyConfig
+        STATS = (Stat("requests", "instructions", "instructions passed on"),)
+
+        def __init__(self, config, machine):
+            super().__init__(machine)
+            self.latency = config.latency
+
+        def access(self, wi, arrive_fp, starts):
+            self.requests[0] += 1
+            return self.next.access(wi, arrive_fp + self.latency * FP, starts)
+
+    register_unit(Toy)
+    try:
+        plan = compute_plan(["a"])
+        plan.add(0, "load", "a", 32, 1, lambda i, s: i * 4, 4)
+        path = "memory.levels=['coalescer', 'toy', 'dram']"
+        cycles, m = simulate(plan, {"a": 128}, 32, [path, "toy.latency=9"])
+        assert cycles == 104 + 9                       # the single-warp load timeline, 9 cycles later
+        assert m.built_units() == ["core", "coalescer", "toy", "dram"]
+        rows = [r for r in m.unit_stats(cycles) if r["unit"] == "memory.toy"]
+        assert [(r["stat"], r["value"]) for r in rows[:1]] == [("requests", 1)]
+        assert simulate(plan, {"a": 128}, 32)[0] == 104      # not on the path: not built, no effect
+        with pytest.raises(ConfigError, match="'tpy' is not a memory level.*toy"):
+            load_gpu("gtx280", ["memory.levels=['coalescer', 'tpy', 'dram']"])
+    finally:
+        unregister_unit("toy")
+    with pytest.raises(ConfigError, match="memory.levels: 'toy' is not a memory level"):
+        load_gpu("gtx280", [path])
+
+
+def test_program_view_is_typed_instructions():
+    # FreePipe's mapping: one thread per triangle, set up in software, looping over its fragments
+    plan = OpPlan([Pass("draw", "geometry", "fragment", software=True)], ["a"])
+    plan.add(0, "store", "a", 4, 1, lambda i, s: i * 4, 4)
+    gpu = load_gpu("gtx280", SIMPLE + ["raster.setup_instructions=10"])
+    work = Workload(plan, layout_bases(plan.structures, {"a": 16}), 64, 64, np.zeros(4, np.int64),
+                    np.array([0, 0, 1, 1]), triangles=2)
+    prog = lower(work, gpu)
+    from gpusim.hw.program import Compute, MemoryOp
+    got = prog.warp(0)
+    assert got[0] == Compute(10)
+    assert [type(i) for i in got[1:]] == [MemoryOp, MemoryOp]
+    assert [(i.op, i.unit, i.lanes, list(i.thread)) for i in got[1:]] == [("store", "coalescer", 2, [0, 2]),
+                                                                           ("store", "coalescer", 2, [1, 3])]
+
+
+def test_stats_come_from_declarations_into_one_long_table():
+    plan = _reorder_plan()
+    cycles, m = simulate(plan, {"a": 128, "fb": 4}, 64, ["core.sms=2"])
+    rows = m.unit_stats(cycles)
+    declared = {(u.path(), s.name): s for u in m.units.values() for s in u.STATS}
+    assert {(r["unit"], r["stat"]) for r in rows} == set(declared)
+    for r in rows:
+        s = declared[(r["unit"], r["stat"])]
+        assert (r["unit_of_measure"], r["doc"]) == (s.unit, s.doc)
+        assert not any(ch.isdigit() for ch in r["stat"])               # dimensions are labels, not names
+        assert r["labels"] == "" or r["labels"].startswith("instance=")
+    assert {r["unit"] for r in rows} == {"core", "memory.coalescer", "memory.dram", "rop"}
+
+
+def test_line_trace_shows_each_units_state_as_the_run_goes(capsys):
+    plan = _reorder_plan()
+    cycles, m = simulate(plan, {"a": 128, "fb": 4}, 64, ["core.sms=2", "runner.trace_every=50"])
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == -(-101 // 50)            # the pass's warps are done at cycle 101 (the last blend issues)
+    assert lines[0].startswith("t=0 pass=0 | core: ") and "| memory.coalescer" not in lines[0]
+    assert "coalescer: -" in lines[0] and "dram: free" in lines[0] and "rop: held" in lines[-1]
+    assert m.line_trace().startswith(f"t={cycles} pass=0")

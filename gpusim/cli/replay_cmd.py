@@ -92,8 +92,11 @@ def _print_timing(t: dict) -> None:
     if len(t["passes"]) > 12:
         print(f"  pass       ... {len(t['passes']) - 12} more")
     for name, u in t["units"].items():
-        print(f"  unit       {name:<10} utilisation mean {u['utilisation_mean']:.1%}"
-              + (f", max {u['utilisation_max']:.1%}" if "utilisation_max" in u else ""))
+        if "utilisation_mean" in u:
+            print(f"  unit       {name:<10} utilisation mean {u['utilisation_mean']:.1%}"
+                  + (f", max {u['utilisation_max']:.1%}" if "utilisation_max" in u else ""))
+        else:
+            print(f"  unit       {name:<10} {u.get('requests', 0):,} requests")
     if t.get("rmw_hazards") is not None:
         line = f"{t['rmw_hazards']:,} fragments read an obsolete value ({t['rmw_hazard_pixels']:,} pixels)"
         if "rmw_image_error" in t:

@@ -167,11 +167,9 @@ def timing_stat_rows(timing: dict) -> list[dict]:
         rows.append(_stat("machine", "rmw_hazards", timing["rmw_hazards"], "fragments",
                           "fragments that read an obsolete value (RMW hazard)"))
     for s in timing.get("unit_stats", []):
-        rows.append(_stat(s["unit"], s["stat"], s["value"], s["unit_of_measure"], s["doc"],
-                          f"instance={s['instance']}"))
-    per_instance = {s["unit"] for s in timing.get("unit_stats", [])}
-    for unit, summary in timing.get("units", {}).items():
-        if unit not in per_instance:            # a unit without per-instance stats (the core; analytic units)
+        rows.append(_stat(s["unit"], s["stat"], s["value"], s["unit_of_measure"], s["doc"], s["labels"]))
+    if not timing.get("unit_stats"):            # a level without declared stats (analytic estimates)
+        for unit, summary in timing.get("units", {}).items():
             for stat, value in summary.items():
                 rows.append(_stat(unit, stat, value, "cycles" if stat.endswith("cycles") else "1",
                                   f"{stat} of the {unit} units ({timing['fidelity']} estimate)"))

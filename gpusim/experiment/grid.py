@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from gpusim.config import to_dict
 from gpusim.errors import ConfigError
 from gpusim.hw import THESIS_RULES
 from gpusim.hw.gpu import GpuConfig
@@ -145,7 +144,7 @@ def expand(exp) -> list[RunSpec]:
 
 def gpu_identity(config: GpuConfig) -> dict:
     """The GPU config as it enters a run's id: ``runner.workers`` changes no figure, so it is left out."""
-    data = to_dict(config)
+    data = config.to_dict()
     data["runner"] = {k: v for k, v in data["runner"].items() if k != "workers"}
     return data
 

@@ -10,7 +10,6 @@ every task (each file atomically), and returns a :class:`Summary`.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import os
 import sys
@@ -25,6 +24,7 @@ from gpusim.experiment.executors import make_executor, probe
 from gpusim.experiment.grid import GPU_LEVELS, RunSpec, expand, resolved_run, run_id
 from gpusim.experiment.spec import Experiment
 from gpusim.experiment.store import FIGURE_COLUMNS, LEAD_COLUMNS, ResultsStore
+from gpusim.hw.gpu import with_section
 
 
 @dataclass
@@ -144,7 +144,7 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
         for r, i in members:
             gpu = r.gpu_config if r.fidelity in GPU_LEVELS else None
             if gpu is not None and pooled:       # one process per worker: the passes replay serially
-                gpu = dataclasses.replace(gpu, runner=dataclasses.replace(gpu.runner, workers=1))
+                gpu = with_section(gpu, "runner", workers=1)
             task_runs.append(TaskRun(i, r.fidelity, gpu))
         tasks.append(Task(infos[first.source]["path"], first.scheme, first.params, tuple(task_runs), exp.path))
     todo = sum(len(t.runs) for t in tasks)

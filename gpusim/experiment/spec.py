@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gpusim.config import apply_overrides, build, load_toml, parse_override
+from gpusim.config import apply_overrides, load_toml, parse_override
 from gpusim.errors import ConfigError, GpusimError
 from gpusim.hw import FIDELITIES, gpu_presets
 from gpusim.hw.gpu import GpuConfig, preset_file
@@ -327,7 +327,7 @@ def gpu_table(spec: str, exp: Experiment) -> dict:
     if path.suffix == ".toml" and path.is_file():
         data = load_toml(path)
         try:
-            build(GpuConfig, copy.deepcopy(data), str(path))
+            GpuConfig.from_table(copy.deepcopy(data), str(path))
         except ConfigError as exc:
             raise ConfigError(f"{exp.path}: gpus: {exc}") from None
         return data
@@ -346,7 +346,7 @@ def build_gpu(table: dict, overrides: list[str], exp: Experiment) -> GpuConfig:
         apply_overrides(data, overrides)
     except ConfigError as exc:
         raise ConfigError(f"{exp.path}: gpu-set: {str(exc).removeprefix('--set ')}") from None
-    return build(GpuConfig, data, f"{exp.path}: gpu-set")
+    return GpuConfig.from_table(data, f"{exp.path}: gpu-set")
 
 
 def load_experiment(spec: str | None = None, overrides: list[str] | None = None) -> Experiment:

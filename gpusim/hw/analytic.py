@@ -10,7 +10,7 @@ largest of
 * latency: each lane's dependent chain (an operation that waits for a result
   adds that unit's round trip), the slowest warp, or the SM's warps' chains
   divided by the resident warps that hide each other;
-* dram: requests (lanes of a warp on one ``memory.segment_bytes`` segment, as
+* dram: requests (lanes of a warp on one ``coalescer.segment_bytes`` segment, as
   at the first operation of each lane, measured on up to 4,096 warps spread
   evenly over the group) x bytes, over all channels;
 * atomic: operations over all atomic units, and the hottest address
@@ -30,13 +30,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.hw.lower import (ATOMIC, MEM, OP_CLASS, OP_PRODUCES, ROP, SCOREBOARD, split_by, submitted_triangles,
-                             thread_mapping)
-from gpusim.hw.machine import flush_cycles
+from gpusim.hw.core import SimtCore, flush_cycles
+from gpusim.hw.lower import PRODUCES, split_by, submitted_triangles, thread_mapping
 from gpusim.hw.memory import SECTOR
-from gpusim.hw.units import address_ids
+from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
-from gpusim.opplan import OPS, ThreadRange
+
+# the units an operation goes to from the core (analytic estimates report memory traffic as DRAM's)
+MEM, ATOMIC, ROP, SCOREBOARD = "coalescer", "atomic", "rop", "scoreboard"
 
 
 def _distinct(a: np.ndarray) -> int:
@@ -72,10 +73,8 @@ def _warp_sample(lanes: np.ndarray, ws: int, warps: int = 4096) -> np.ndarray:
 
 def _expand_pass(g, n):
     """(pass, lane index into g.thread, ops) per (pass, thread) of a group spanning passes."""
-    i = np.repeat(np.arange(n), g.count)
-    first = np.cumsum(g.count) - g.count
-    seq = np.arange(len(i)) - np.repeat(first, g.count)
-    p = np.asarray(g.pass_fn(i, seq), np.int64)
+    i, seq = g.expand_ops()
+    p = np.asarray(g.pass_of(i, seq), np.int64)
     key = p * n + i
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
         key = np.sort(key)
@@ -90,6 +89,7 @@ def analytic_timing(result, work, gpu) -> dict:
     icn = m.interconnect_latency
     lat = {MEM: 2 * icn + gpu.dram.latency + (gpu.l2.latency if gpu.l2.size_bytes else 0),
            ATOMIC: 2 * icn + gpu.atomic.latency, ROP: 2 * icn + gpu.rop.latency, SCOREBOARD: 0}
+    segment = gpu.coalescer.segment_bytes
     n_pass = len(plan.passes)
     wis = np.zeros(n_pass)
     dram_bytes = np.zeros(n_pass)
@@ -104,9 +104,8 @@ def analytic_timing(result, work, gpu) -> dict:
                                           #                     warp max))]
     for g in plan.groups:
         n = len(g.thread)
-        thread = np.arange(n) if isinstance(g.thread, ThreadRange) else g.thread
-        op = OPS.index(g.op)
-        cls, produces = int(OP_CLASS[op]), bool(OP_PRODUCES[op])
+        thread = g.thread_ids()
+        cls, produces = entry_unit(g.op), g.op in PRODUCES
         if g.pass_fn is not None:
             gp, li, cnt = _expand_pass(g, n)
             split = split_by(gp)
@@ -153,10 +152,10 @@ def analytic_timing(result, work, gpu) -> dict:
                 zero = np.broadcast_to(np.zeros(1, np.int64), sample.shape)
                 addr = bases[g.structure] + np.asarray(g.offset(sample, zero), np.int64)
                 bytes_ = float(nb) if nb is not None else float(np.mean(g.bytes(sample, zero)))
-                seg = addr // m.segment_bytes
+                seg = addr // segment
                 wkey = ((np.arange(len(seg)) // ws) << 36) + seg
                 requests_per_lane = _distinct(wkey) / max(1, len(seg))
-                req_bytes = min(max(m.segment_bytes, SECTOR),
+                req_bytes = min(max(segment, SECTOR),
                                 -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
                 dram_bytes[p] += ops * requests_per_lane * req_bytes
             else:
@@ -168,7 +167,7 @@ def analytic_timing(result, work, gpu) -> dict:
                 atomic_ops[p] += ops
                 hottest[p] = max(hottest[p], float(_hottest(addr)))
             elif cls == ROP:
-                unit = (addr // m.interleave_bytes) % gpu.rop.units
+                unit = interleave(addr, m.interleave_bytes, gpu.rop.units)
                 svc = (gpu.blender.cycles_per_op + (nb or 0) / gpu.blender.bytes_per_cycle
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
                 rop_unit[p] += np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
@@ -195,7 +194,7 @@ def analytic_timing(result, work, gpu) -> dict:
     passes, total = [], 0
     for p, pk in enumerate(plan.passes):
         if pk.kind == "flush":
-            cyc = flush_cycles(gpu, -(-work.width * work.height // ws))
+            cyc = flush_cycles(c, -(-work.width * work.height // ws))
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": 0, "bound": "flush"})
             total += cyc
             continue
@@ -206,7 +205,7 @@ def analytic_timing(result, work, gpu) -> dict:
         lane_chain = lane_chain[lane_chain > 0]       # every lane issues, so a present lane has a chain
         wchain = _warp_max(lane_chain, ws)
         n_warps = len(wchain)
-        sm = np.arange(n_warps) % c.sms
+        sm = SimtCore.place(n_warps, c.sms)
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
         n_sm = np.bincount(sm, minlength=c.sms)
         bounds = {

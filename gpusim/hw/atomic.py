@@ -15,82 +15,103 @@ the interconnect back to the core.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from gpusim.hw.lower import ATOMIC, Program
-from gpusim.hw.units import FP, Unit, UnitStat, address_ids, cycles, div, fp_costs, mod
+from gpusim.config import param
+from gpusim.hw.unit import (BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, address_ids, cycles, div, fp_costs,
+                            interleave, mod, register_unit)
 
 
-class AtomicUnits(Unit):
+@dataclass(frozen=True)
+class AtomicConfig:
+    """Atomic unit in each partition."""
+
+    latency: int = param(500, unit="cycles", doc="latency of one atomic (read, modify, write at the partition)",
+                         min=0)
+    ops_per_cycle: float = param(1.0, unit="ops/cycle", doc="atomic throughput per partition", gt=0)
+    same_address_cycles: int = param(60, unit="cycles", doc="occupancy of one address by one atomic: "
+                                     "operations on the same address serialize at this interval", min=1)
+
+
+@register_unit
+class AtomicUnit(Unit):
     name = "atomic"
+    Config = AtomicConfig
+    issued = frozenset({"atomic_min", "atomic_max", "atomic_inc", "atomic_exch"})
+    STATS = (BUSY, REQUESTS, UTILISATION,
+             Stat("hottest_address_ops", "operations", "most operations on a single address (the hottest word)",
+                  per_instance=False),
+             Stat("addresses", "addresses", "distinct addresses", per_instance=False))
 
-    def __init__(self, gpu, program: Program):
-        super().__init__(gpu.memory.partitions)
-        self.gpu = gpu
+    def __init__(self, config: AtomicConfig, machine):
+        mem = machine.gpu.memory
+        super().__init__(mem.partitions)
         P = self.instances
-        c = gpu.atomic
-        self.icn, self.sac, self.tail = gpu.memory.interconnect_latency, c.same_address_cycles, \
-            c.latency + gpu.memory.interconnect_latency
-        self.free = [0] * P                          # sub-cycles
-        self.until = 0                               # cycles: the last address hold ends
-        wis, counts, wi_row = program.storage(ATOMIC)
-        addr = program.rows_of(ATOMIC).address
-        part = mod(div(addr, gpu.memory.interleave_bytes), P)
+        prog = machine.program
+        self.icn, self.hold = mem.interconnect_latency, config.same_address_cycles
+        self.tail = config.latency + mem.interconnect_latency
+        self.free = [0] * P                          # sub-cycle each partition's unit is free
+        self.until = 0                               # cycle the last address hold ends
+        wis, counts, wi_row = prog.storage(self.name)
+        addr = prog.rows_of(self.name).address
+        part = interleave(addr, mem.interleave_bytes, P)
         # operations per (instruction, partition) cell, dense; the unit's work is static
         cell = wi_row * P + part
-        nops = np.bincount(cell, minlength=program.instructions * P) if len(cell) else np.zeros(0, np.int64)
+        nops = np.bincount(cell, minlength=prog.instructions * P) if len(cell) else np.zeros(0, np.int64)
         hit = np.flatnonzero(nops)
-        cost = fp_costs(nops[hit], c.ops_per_cycle)
-        k_wi, k_p = div(hit, P), mod(hit, P)
-        self.busy_fp = np.bincount(k_p, weights=cost, minlength=P).astype(np.int64).tolist()
-        self.requests = np.bincount(k_p, weights=nops[hit], minlength=P).astype(np.int64).tolist()
-        # flat lists: instruction wi owns cells po[wi]:po[wi + 1]; cell j its lanes' addresses ids[cl[j]:cl[j + 1]],
-        # grouped by cell (a stable sort: the lanes of one address, all in one partition, stay in lane order)
-        self.kp, self.kc = k_p.tolist(), cost.tolist()
-        self.po = np.searchsorted(k_wi, np.arange(program.instructions + 1)).tolist()
-        self.cl = np.r_[0, np.cumsum(nops[hit])].tolist()
+        cost = fp_costs(nops[hit], config.ops_per_cycle)
+        cell_wi, cell_part = div(hit, P), mod(hit, P)
+        self.busy_fp = np.bincount(cell_part, weights=cost, minlength=P).astype(np.int64).tolist()
+        self.requests = np.bincount(cell_part, weights=nops[hit], minlength=P).astype(np.int64).tolist()
+        # flat lists: instruction wi owns cells cells_of[wi]:cells_of[wi + 1]; cell j its lanes' address ids
+        # lanes_of[j]:lanes_of[j + 1], grouped by cell (a stable sort: the lanes of one address, all in one
+        # partition, stay in lane order)
+        self.cell_part, self.cell_cost = cell_part.tolist(), cost.tolist()
+        self.cells_of = np.searchsorted(cell_wi, np.arange(prog.instructions + 1)).tolist()
+        self.lanes_of = np.r_[0, np.cumsum(nops[hit])].tolist()
         if len(cell) > 1 and not (cell[1:] >= cell[:-1]).all():
             addr = addr[np.argsort(cell, kind="stable")]
-        ids, self.addr_ops = address_ids(addr)           # operations per address: for the stats
-        self.ids = ids.tolist()
-        self.addr_free = [0] * (int(ids.max()) + 1 if len(ids) else 0)      # cycles
+        ids, self.ops_per_address = address_ids(addr)
+        self.lane_address = ids.tolist()
+        self.address_free = [0] * (int(ids.max()) + 1 if len(ids) else 0)      # cycle each address is free
 
-    def access(self, wi: int, t: int) -> int:
-        arrive = (t + self.icn) * FP
-        free, kp, kc, cl, ids, fa, sac = self.free, self.kp, self.kc, self.cl, self.ids, self.addr_free, self.sac
+    def serve(self, wi: int, now: int) -> int:
+        arrive = (now + self.icn) * FP
+        free, hold, address_free, lane_address = self.free, self.hold, self.address_free, self.lane_address
+        cell_part, cell_cost, lanes_of = self.cell_part, self.cell_cost, self.lanes_of
         last = 0
-        for j in range(self.po[wi], self.po[wi + 1]):
-            p = kp[j]
+        for j in range(self.cells_of[wi], self.cells_of[wi + 1]):
+            p = cell_part[j]
             start = free[p] if free[p] > arrive else arrive
-            free[p] = start + kc[j]
-            u = -(-start // FP)          # the cycle this partition's unit takes the instruction's lanes
-            if u > last:
-                last = u
-            after = u + sac
-            for a in ids[cl[j]:cl[j + 1]]:   # lanes of one address in lane order: each waits for the last
-                st = fa[a]
-                if st <= u:
-                    fa[a] = after
-                else:
-                    fa[a] = st + sac
-                    if st > last:
-                        last = st
-        if last + sac > self.until:
-            self.until = last + sac
+            free[p] = start + cell_cost[j]
+            taken = -(-start // FP)          # the cycle this partition's unit takes the instruction's lanes
+            if taken > last:
+                last = taken
+            after = taken + hold
+            for a in lane_address[lanes_of[j]:lanes_of[j + 1]]:   # lanes of one address in lane order
+                held = address_free[a]
+                if held <= taken:
+                    address_free[a] = after
+                else:                        # the address is held: this lane waits for the last
+                    address_free[a] = held + hold
+                    if held > last:
+                        last = held
+        if last + hold > self.until:
+            self.until = last + hold
         return last + self.tail
 
     def idle_at(self) -> int:
         """The cycle every unit and address is free again."""
         return max(self.until, cycles(max(self.free)))
 
-    def stats(self, total_cycles):
-        rows = super().stats(total_cycles)
-        rows.append(UnitStat(self.name, "max_ops_one_address", int(self.addr_ops.max()) if len(self.addr_ops) else 0,
-                             "operations", "most operations on a single address (the hottest word)"))
-        rows.append(UnitStat(self.name, "addresses", len(self.addr_ops), "addresses", "distinct addresses"))
-        return rows
+    def values(self, total_cycles: int) -> dict:
+        ops = self.ops_per_address
+        return super().values(total_cycles) | {"hottest_address_ops": int(ops.max()) if len(ops) else 0,
+                                               "addresses": len(ops)}
 
-    def summary(self, total_cycles):
-        return super().summary(total_cycles) | {
-            "addresses": int(len(self.addr_ops)),
-            "max_ops_one_address": int(self.addr_ops.max()) if len(self.addr_ops) else 0}
+    def summary(self, total_cycles: int) -> dict:
+        ops = self.ops_per_address
+        return super().summary(total_cycles) | {"addresses": int(len(ops)),
+                                                "hottest_address_ops": int(ops.max()) if len(ops) else 0}

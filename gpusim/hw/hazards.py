@@ -13,18 +13,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpusim.hw.lower import MEM, RMW_READ, RMW_WRITE, Program
+from gpusim.hw.program import Program
+from gpusim.opplan import OPS
+
+RMW_READ, RMW_WRITE = OPS.index("rmw_read"), OPS.index("rmw_write")
 
 
-def rmw_windows(program: Program, sample: np.ndarray, threads: int):
-    """(read cycle, write cycle) of each fragment thread (-1 where it has no RMW)."""
+def rmw_windows(program: Program, service: np.ndarray, threads: int):
+    """(read cycle, write cycle) of each fragment thread (-1 where it has no RMW); ``service``: per row of the
+    coalescer's instructions, the cycle its partition served it (Coalescer.rmw_service_cycles)."""
     read = np.full(threads, np.iinfo(np.int64).max, np.int64)
     write = np.full(threads, -1, np.int64)
-    rows = program.rows_of(MEM)          # ``sample`` is per memory row
+    rows = program.rows_of("coalescer")
     r = rows.op == RMW_READ
     w = rows.op == RMW_WRITE
-    np.minimum.at(read, rows.thread[r], sample[r])
-    np.maximum.at(write, rows.thread[w], sample[w])
+    np.minimum.at(read, rows.thread[r], service[r])
+    np.maximum.at(write, rows.thread[w], service[w])
     read[read == np.iinfo(np.int64).max] = -1
     return read, write
 

@@ -1,52 +1,47 @@
-"""Lowering a scheme's operations to warp instructions: what the SIMT cores execute.
+"""Lowering a scheme's operations to a program of warp instructions (gpusim.hw.program).
 
-The input is the scheme's :class:`~gpusim.schemes.opstream.OpPlan`, the grouped
-form of its OpStream ("these threads issue ``count`` operations ``op`` on
+The input is the scheme's :class:`~gpusim.opplan.OpPlan`, the grouped form of
+its OpStream ("these threads issue ``count`` operations ``op`` on
 ``structure``", in program order). Lowering works group by group and never
 materialises the row-sorted OpStream: the rows it makes are those of the warp
 instructions, grouped by instruction.
 
 A *lane* is a thread of a pass: a fragment, a pixel or a memory entry, or, with
 the ``triangle`` thread mapping, a triangle whose thread loops over its
-fragments (FreePipe, seed 000 section 3). A warp is ``warp_size`` consecutive
-lanes in submission order; warps go to the SMs round robin. Warps execute
-SIMT, group after group in program order: a group whose lanes issue
-``count`` operations is a loop of ``max(count)`` warp instructions over the
-warp's lanes, instruction ``k`` carrying the lanes with ``count > k`` (the
-others are masked off). With the triangle mapping, the thread's loop over its
-fragments is the outer loop: iteration ``j`` runs every group for the
+fragments (FreePipe, seed 000 section 3) after a :class:`Compute` instruction
+of triangle setup. A warp is ``warp_size`` consecutive lanes in submission
+order. Warps execute SIMT, group after group in program order: a group whose
+lanes issue ``count`` operations is a loop of ``max(count)`` warp instructions
+over the warp's lanes, instruction ``k`` carrying the lanes with ``count > k``
+(the others are masked off). With the triangle mapping, the thread's loop over
+its fragments is the outer loop: iteration ``j`` runs every group for the
 ``j``-th fragment of each lane's triangle. So a warp's instructions run in the
 order (fragment iteration ``j``, group, ``k``).
 
-Everything here is vectorized numpy; the event model (gpusim.hw.machine) then
-walks warps and instructions.
+Each operation goes to the unit registered to take it from the core
+(:func:`gpusim.hw.unit.entry_unit`). Everything here is vectorised numpy; the
+SIMT cores (gpusim.hw.core) then walk warps and instructions.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from functools import cached_property
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from gpusim.errors import GpusimError
-from gpusim.hw.units import div, mod
+from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
+from gpusim.hw.scoreboard import scoreboard_cell
+from gpusim.hw.unit import div, entry_unit, mod
 from gpusim.metrics.composite import run_starts
-from gpusim.opplan import DEFAULT_MAX_OPS, OPS, OpPlan, ThreadRange
+from gpusim.opplan import DEFAULT_MAX_OPS, OPS, OpPlan
 from gpusim.schemes.common.arrays import rank_in_runs
 
-MEM, ATOMIC, ROP, SCOREBOARD = 0, 1, 2, 3
-UNIT_CLASSES = ("memory", "atomic", "rop", "scoreboard")
-_CLASS_OF_OP = {"load": MEM, "store": MEM, "rmw_read": MEM, "rmw_write": MEM,
-                "atomic_min": ATOMIC, "atomic_max": ATOMIC, "atomic_inc": ATOMIC, "atomic_exch": ATOMIC,
-                "blend": ROP, "depth_test": ROP, "stencil": ROP, "program_blend": ROP,
-                "scoreboard": SCOREBOARD}
 #: operations whose result a later dependent operation waits for
 PRODUCES = frozenset({"load", "rmw_read", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
                       "depth_test", "stencil", "scoreboard"})
-OP_CLASS = np.array([_CLASS_OF_OP[o] for o in OPS], np.int8)
 OP_PRODUCES = np.array([o in PRODUCES for o in OPS])
-RMW_READ, RMW_WRITE = OPS.index("rmw_read"), OPS.index("rmw_write")
 
 
 class Workload:
@@ -58,10 +53,10 @@ class Workload:
     """
 
     def __init__(self, plan: OpPlan, bases: dict[str, int], width: int, height: int, frag_pixel,
-                 frag_prim, result=None, triangles: int | None = None):
+                 frag_prim, triangles: int | None = None):
         """``frag_pixel`` and ``frag_prim``: arrays, or callables making them when first needed (the analytic
         level never needs the pixels)."""
-        self.plan, self.bases, self.result = plan, bases, result
+        self.plan, self.bases = plan, bases
         self.width, self.height = width, height
         self._made = {"frag_pixel": frag_pixel, "frag_prim": frag_prim}
         if triangles is None:
@@ -92,137 +87,11 @@ class Workload:
             return lambda: values() if order is None else values()[order]
 
         return cls(result.plan, result.bases(), trace.width, trace.height, pick(trace.pixel_ids),
-                   pick(lambda: trace.prim), result, int(trace.prim.max()) + 1 if len(trace) else 0)
+                   pick(lambda: trace.prim), int(trace.prim.max()) + 1 if len(trace) else 0)
 
     @property
     def operations(self) -> int:
         return self.plan.total_ops()
-
-
-@dataclass
-class PassProgram:
-    """The warps of one pass: warp w runs instructions ``wi_start[w]..wi_start[w+1]-1``."""
-
-    index: int
-    name: str
-    kind: str
-    wi_start: np.ndarray           # per warp, plus a final end
-    lanes: int                     # threads of the pass
-    flush_warps: int = 0           # ALU-only warps of a flush pass (a full-screen quad, no memory ops)
-    warp_triangles: np.ndarray | None = None   # fixed-function rasterizer: triangles rasterized before each
-                                               # warp's fragments are all out (its last triangle + 1)
-    triangles: int = 0             # triangles the fixed-function rasterizer takes in the pass
-    setup_cycles: int = 0          # issue cycles of software triangle setup at each warp's start
-    operations: int = 0            # operations lowered (after any sampling)
-    operations_total: int = 0      # operations of the pass in the plan
-
-    @property
-    def warps(self) -> int:
-        return len(self.wi_start) - 1
-
-    @property
-    def instructions(self) -> int:
-        return int(self.wi_start[-1] - self.wi_start[0]) if self.warps else 0
-
-
-class Rows:
-    """The operations of one unit class, instruction by instruction (each instruction's lanes in lane order).
-
-    Kept as the parts lowering made (one per plan group and pass, each a run of
-    whole instructions), so units can build from them part by part; the
-    columns ``op``, ``address``, ``nbytes`` and ``thread`` over all rows are
-    joined on first use.
-    """
-
-    def __init__(self, parts: list[tuple]):
-        self.parts = parts             # (op code, address, bytes: int or per row, thread) per part, in storage order
-
-    def __len__(self) -> int:
-        return sum(len(p[1]) for p in self.parts)
-
-    def offsets(self) -> list[int]:
-        """Row offset of each part."""
-        out, at = [], 0
-        for p in self.parts:
-            out.append(at)
-            at += len(p[1])
-        return out
-
-    def _join(self, col: int, dtype) -> np.ndarray:
-        cols = [np.full(len(p[1]), p[col], dtype) if np.isscalar(p[col]) else np.asarray(p[col], dtype)
-                for p in self.parts]
-        return np.concatenate(cols) if cols else np.zeros(0, dtype)
-
-    @cached_property
-    def op(self) -> np.ndarray:
-        return self._join(0, np.uint8)
-
-    @cached_property
-    def address(self) -> np.ndarray:
-        return self._join(1, np.int64)
-
-    @cached_property
-    def nbytes(self) -> np.ndarray:
-        return self._join(2, np.int64)
-
-    @cached_property
-    def thread(self) -> np.ndarray:
-        return self._join(3, np.int64)
-
-
-@dataclass
-class Program:
-    """Warp instructions of a whole run, in issue order, and the rows (operations) they carry.
-
-    Rows are kept per unit class (``rows_of(cls)``); instruction ``i`` carries
-    rows ``row_lo[i]..row_hi[i]-1`` of its class (its lanes, in lane order),
-    stored instruction by instruction though not in issue order.
-    """
-
-    passes: list[PassProgram]
-    # per instruction
-    row_lo: np.ndarray
-    row_hi: np.ndarray
-    wi_op: np.ndarray
-    wi_class: np.ndarray
-    wi_dep: np.ndarray
-    wi_produces: np.ndarray
-    wi_warp: np.ndarray            # global warp number
-    wi_pass: np.ndarray
-    wi_group: np.ndarray           # the plan group the instruction comes from
-    wi_k: np.ndarray               # its iteration inside the group's loop
-    row_sets: dict[int, Rows]      # unit class -> its rows
-    frag_pixel: np.ndarray = field(repr=False, default=None)   # pixel of each fragment thread
-
-    @property
-    def instructions(self) -> int:
-        return len(self.wi_op)
-
-    @property
-    def operations(self) -> int:
-        return sum(len(r) for r in self.row_sets.values())
-
-    def classes(self) -> set[int]:
-        return set(np.unique(self.wi_class).tolist())
-
-    def rows_of(self, cls: int) -> Rows:
-        return self.row_sets.get(cls) or Rows([])
-
-    @cached_property
-    def row_bounds(self) -> tuple[list, list]:
-        """``row_lo`` and ``row_hi`` as lists (the units index them per instruction)."""
-        return self.row_lo.tolist(), self.row_hi.tolist()
-
-    def rows(self, wi: int) -> slice:
-        """Rows of instruction ``wi`` in ``rows_of(wi_class[wi])``."""
-        return slice(int(self.row_lo[wi]), int(self.row_hi[wi]))
-
-    def storage(self, cls: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Instructions of class ``cls`` in row-storage order, their lane counts, and each row's instruction."""
-        wis = np.flatnonzero(self.wi_class == cls)
-        wis = wis[np.argsort(self.row_lo[wis], kind="stable")]
-        counts = self.row_hi[wis] - self.row_lo[wis]
-        return wis, counts, np.repeat(wis, counts)
 
 
 def thread_mapping(gpu, p) -> str:
@@ -268,26 +137,16 @@ def split_by(values: np.ndarray) -> list[tuple[int, np.ndarray]]:
 def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes."""
     n = len(g.thread)
-    count = g.count
-    i = np.arange(n, dtype=np.int64)
-    threads = i if isinstance(g.thread, ThreadRange) else g.thread
-    if int(count.min()) == 1 and int(count.max()) == 1:
-        seq = np.broadcast_to(np.zeros(1, np.int64), (n,))      # no allocation: every op is the first
-        single = True
-    else:
-        i = np.repeat(i, count)
-        seq = np.arange(len(i), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
-        single = False
-    base = bases[g.structure]
-    addr = np.asarray(g.offset(i, seq), np.int64) + base
+    threads = g.thread_ids()
+    i, seq = g.expand_ops()
+    single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
+    addr = np.asarray(g.offset(i, seq), np.int64) + bases[g.structure]
     nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
-    if g.pass_fn is None and np.isscalar(g.pass_index):
-        return [_Piece(gi, int(g.pass_index), threads if single else threads[i], None if single else seq, addr,
-                       nbytes)]
-    pass_of = (np.asarray(g.pass_fn(i, seq), np.int64) if g.pass_fn is not None
-               else np.asarray(g.pass_index, np.int64)[i])
+    pass_of = g.pass_of(i, seq)
+    if np.isscalar(pass_of):
+        return [_Piece(gi, int(pass_of), threads if single else threads[i], None if single else seq, addr, nbytes)]
     pieces = []
-    for p, sel in split_by(pass_of):
+    for p, sel in split_by(np.asarray(pass_of, np.int64)):
         ii = i[sel]
         # iteration inside this pass: position among the thread's operations of the group in the pass
         k = rank_in_runs(ii)
@@ -332,16 +191,18 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         if len(pc.thread):
             by_pass[pc.pass_index].append(pc)
 
+    units = tuple(dict.fromkeys(entry_unit(g.op) for g in plan.groups))
     passes, inst = [], []
-    rows: dict[int, list] = {}         # unit class -> row arrays of its pieces
-    row_at: dict[int, int] = {}
+    rows: dict[str, list] = {}         # unit -> row arrays of its pieces
+    row_at: dict[str, int] = {}
+    setup_warps = []                   # warps that start with triangle setup (a Compute instruction)
     warp0 = 0
     for p, pk in enumerate(plan.passes):
         mode, ps = modes[p], by_pass[p]
         ops = sum(len(pc.thread) for pc in ps)
         if not ps:
             flush = -(-work.width * work.height // ws) if pk.kind == "flush" else 0
-            passes.append(PassProgram(p, pk.name, pk.kind, np.zeros(1, np.int64), 0, flush,
+            passes.append(PassProgram(p, pk.name, pk.kind, np.zeros(1, np.int64), 0, warp0, flush,
                                       operations=0, operations_total=int(totals[p])))
             continue
         # lanes of the pass: distinct lane keys in submission order
@@ -386,28 +247,28 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                 got = _place(pc, key, key_lo, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps, ws, lane_bits,
                              pk.name)
                 placed.append((pc.thread, pc.k, got))
-            order, hi, w, j, start = got
+            order, w, j, start = got.order, got.warp, got.iteration, got.starts
             if order is not None:
                 pc = pc.take(order)
             k = pc.k
-            n = len(hi)
+            n = len(w)
             op = OPS.index(plan.groups[pc.group].op)
-            cls = int(OP_CLASS[op])
-            at = row_at.get(cls, 0)
+            unit = entry_unit(OPS[op])
+            at = row_at.get(unit, 0)
             inst.append((w[start] + warp0, j[start] if j is not None else np.zeros(len(start), np.int64),
                          np.full(len(start), pc.group, np.int64),
                          k[start] if k is not None else np.zeros(len(start), np.int64),
                          start + at, np.append(start[1:], n) + at, np.full(len(start), p, np.int64)))
-            rows.setdefault(cls, []).append((op, pc.address, pc.nbytes, pc.thread))
-            row_at[cls] = at + n
-        pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, operations=ops, operations_total=int(totals[p]))
+            rows.setdefault(unit, []).append((op, pc.address, pc.nbytes, pc.thread))
+            row_at[unit] = at + n
+        pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, warp0, operations=ops, operations_total=int(totals[p]))
         if mode == "fragment":           # the fixed-function rasterizer feeds the warps in triangle order
             first_lane = (np.arange(0, n_lanes, ws) if warp_of_lane is None
                           else np.searchsorted(warp_of_lane, np.arange(n_warps)))
             pp.triangles, position = _raster_positions(work, pk, lane_keys)
             pp.warp_triangles = np.maximum.reduceat(position, first_lane)
         elif mode == "triangle":
-            pp.setup_cycles = gpu.raster.setup_instructions * gpu.core.issue_cycles
+            setup_warps.append(np.arange(warp0, warp0 + n_warps))
         pp.wi_start = np.arange(n_warps + 1) + warp0       # global warp numbers; made instruction offsets below
         passes.append(pp)
         warp0 += n_warps
@@ -417,20 +278,38 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         w, g, k, lo, hi, pa = w[order], g[order], k[order], lo[order], hi[order], pa[order]
     else:
         w = g = k = lo = hi = pa = np.zeros(0, np.int64)
-    row_sets = {cls: Rows(parts) for cls, parts in rows.items()}
+    op_of_group = np.array([OPS.index(gr.op) for gr in plan.groups] or [0], np.int64)
+    unit_of_group = np.array([units.index(entry_unit(gr.op)) for gr in plan.groups] or [0], np.int64)
+    dep_of_group = np.array([gr.dep for gr in plan.groups] or [False], bool)
+    wi_op, wi_unit, wi_dep = op_of_group[g], unit_of_group[g], dep_of_group[g]
+    wi_cycles = np.full(len(g), gpu.core.issue_cycles * (1 + gpu.core.instructions_per_op), np.int64)
+    if setup_warps:                  # each warp of a triangle-mapped pass first sets up its triangles
+        sw = np.concatenate(setup_warps)
+        at = np.searchsorted(w, sw)
+        pass_of_warp = pa[at]
+        cols = [(w, sw), (g, -1), (k, 0), (lo, 0), (hi, 0), (pa, pass_of_warp), (wi_op, -1), (wi_unit, COMPUTE),
+                (wi_dep, False), (wi_cycles, gpu.raster.setup_instructions * gpu.core.issue_cycles)]
+        w, g, k, lo, hi, pa, wi_op, wi_unit, wi_dep, wi_cycles = (np.insert(col, at, v) for col, v in cols)
+    row_sets = {unit: Rows(parts) for unit, parts in rows.items()}
     warp_wi_start = np.searchsorted(w, np.arange(warp0 + 1))
     for pp in passes:
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
-    wi_op = np.array([OPS.index(gr.op) for gr in plan.groups], np.int64)[g] if len(g) else g
-    wi_dep = np.array([gr.dep for gr in plan.groups], bool)[g] if len(g) else np.zeros(0, bool)
-    return Program(passes, lo, hi, wi_op, OP_CLASS[wi_op], wi_dep, OP_PRODUCES[wi_op], w, pa, g, k,
-                   row_sets, work.frag_pixel)
+    return Program(passes, units, lo, hi, wi_op, wi_unit, wi_cycles, wi_dep, (wi_op >= 0) & OP_PRODUCES[wi_op],
+                   w, pa, g, k, row_sets, work.frag_pixel)
+
+
+class Placement(NamedTuple):
+    """Where a piece's rows go in the warps' instructions."""
+
+    order: np.ndarray | None       # the rows in instruction order (None: already in it)
+    warp: np.ndarray               # each row's warp (in that order)
+    iteration: np.ndarray | None   # each row's fragment iteration (triangle mapping), or None
+    starts: np.ndarray             # the first row of each instruction
 
 
 def _place(pc: _Piece, key, key_lo: int, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps: int, ws: int,
-           lane_bits: int, name: str):
-    """Where the rows of piece ``pc`` go: (row order or None if already in place, instruction key, warp and
-    fragment iteration of each row in that order, first row of each instruction)."""
+           lane_bits: int, name: str) -> Placement:
+    """Where the rows of piece ``pc`` go (see :class:`Placement`)."""
     r = key if rank_of is None else rank_of[key - key_lo]
     w = div(r, ws) if warp_of_lane is None else warp_of_lane[r]
     j = j_of[pc.thread] if j_of is not None else None
@@ -458,7 +337,7 @@ def _place(pc: _Piece, key, key_lo: int, rank_of, warp_of_lane, lane_in_warp, j_
         order = np.argsort((hi << lane_bits) | mod(r, ws) if plain else full, kind="stable")
         hi, w = hi[order], w[order]
         j = None if j is None else j[order]
-    return order, hi, w, j, run_starts(hi)
+    return Placement(order, w, j, run_starts(hi))
 
 
 def _raster_positions(work: Workload, pk, lane_keys: np.ndarray) -> tuple[int, np.ndarray]:
@@ -506,10 +385,3 @@ def _scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:
         held.add(c)
         out[i] = w
     return out
-
-
-def scoreboard_cell(pixel: np.ndarray, width: int, granularity: int) -> np.ndarray:
-    """Cell of the coarse in-flight image holding each pixel (granularity x granularity pixels)."""
-    x, y = pixel % width, pixel // width
-    cells_x = -(-width // granularity)
-    return (y // granularity) * cells_x + x // granularity

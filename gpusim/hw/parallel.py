@@ -12,7 +12,7 @@ RMW start times (shifted from the share's timeline to the whole run's).
 whenever two passes have work; 0 (the default) uses one per available CPU
 when the program is large enough to gain (``MIN_INSTRUCTIONS``) and no single
 pass holds nearly all of it. A run with an L2 stays serial (the cache's
-contents carry from pass to pass), as does one on a platform without
+contents carry from pass to pass: ``Machine.carries_state``), as does one on a platform without
 ``fork`` or in a process running other (non-daemon) threads. If a share fails (a
 deadlock, the max-cycles guard), the whole run is redone serially, so errors
 read exactly as in a serial run.
@@ -26,7 +26,7 @@ import threading
 
 import numpy as np
 
-from gpusim.hw.units import FP
+from gpusim.hw.unit import FP
 
 MIN_INSTRUCTIONS = 50_000     # warp instructions below which auto mode stays serial (a fork costs ~10-50 ms)
 MAX_SHARE = 0.85              # auto mode stays serial when one pass holds this share of the instructions
@@ -47,14 +47,14 @@ def _other_threads() -> bool:
 
 def plan_shares(machine) -> list[list[int]]:
     """Pass indices per process (one list: serial). Largest passes first, each to the least loaded share."""
-    prog, workers = machine.prog, machine.gpu.runner.workers
+    prog, workers = machine.program, machine.gpu.runner.workers
     auto = workers == 0
     if auto:
         workers = available_cpus()
     weight = [p.instructions for p in prog.passes]
     busy = [i for i, w in enumerate(weight) if w]
     everything = [list(range(len(prog.passes)))]
-    if workers < 2 or len(busy) < 2 or machine.partitions is not None and machine.partitions.l2 is not None:
+    if workers < 2 or len(busy) < 2 or machine.carries_state():
         return everything
     if "fork" not in multiprocessing.get_all_start_methods() or _other_threads():
         return everything
@@ -75,8 +75,8 @@ def plan_shares(machine) -> list[list[int]]:
 def _child(machine, share: list[int], conn) -> None:
     try:
         timeline = machine.run_share(share)
-        parts = machine.partitions
-        rmw = parts.rmw_start_arrays() if parts is not None and parts.rmw_starts is not None else None
+        coalescer = machine.units.get("coalescer")
+        rmw = coalescer.rmw_start_arrays() if coalescer is not None and coalescer.rmw_starts is not None else None
         conn.send(("ok", timeline, machine.counters(), rmw))
     except BaseException as e:             # reported to the parent, which reruns serially
         conn.send(("failed", f"{type(e).__name__}: {e}", None, None))
@@ -112,21 +112,20 @@ def run_shares(machine, shares: list[list[int]]) -> bool:
 
 
 def _merge(machine, shares, got) -> None:
-    n = len(machine.prog.passes)
+    n = len(machine.program.passes)
     local_start, cycles = [0] * n, [0] * n
     for share, (_, timeline, _, _) in zip(shares, got):
         for i, (start, c) in zip(share, timeline):
             local_start[i], cycles[i] = start, c
     start = np.r_[0, np.cumsum(cycles)].astype(np.int64)
     for i in range(n):                     # the guard, as a serial run would have met it
-        machine._guard_max(int(start[i + 1]), i)
+        machine.guard_max(int(start[i + 1]), i)
     for _, _, counters, _ in got:
         machine.merge_counters(counters)
-    parts = machine.partitions
-    if parts is not None and parts.rmw_starts is not None:
+    coalescer = machine.units.get("coalescer")
+    if coalescer is not None and coalescer.rmw_starts is not None:
         shift = (start[:-1] - np.asarray(local_start, np.int64)) * FP          # sub-cycles, per pass
         for _, _, _, (wis, starts) in got:      # (untouched partitions' entries shift too; they are never read)
-            parts.rmw_merged.append((wis, starts + shift[machine.prog.wi_pass[wis]][:, None]))
+            coalescer.rmw_merged.append((wis, starts + shift[machine.program.wi_pass[wis]][:, None]))
     machine.pass_cycles = cycles
-    machine.now = int(start[-1])
-    machine.finished = True
+    machine.finish_at(int(start[-1]))

@@ -1,7 +1,7 @@
-"""ROP units with a reorder buffer, and the programmable blender (seed 004 sections 3.1-3.2).
+"""ROP units with a reorder buffer (seed 004 sections 3.1-3.2).
 
 Fixed-function raster operations (``blend``, ``depth_test``, ``stencil``) and
-programmable-blender invocations (``program_blend``, k-buffer proposal 2) go to
+programmable-blender invocations (``program_blend``, gpusim.hw.blender) go to
 ROP unit ``(address // memory.interleave_bytes) % rop.units``. Operations on
 one address (one pixel's value) commit in submission order (primitive order),
 which keeps blending correct however the shader cores interleave fragments:
@@ -12,108 +12,122 @@ stalls (the core stalls) until an entry frees.
 
 A unit commits one operation at a time: ``commit = max(arrival, previous
 commit on the address, unit free) + service``, with a service of
-``1 / rop.ops_per_cycle`` cycles for fixed-function operations and
-``blender.cycles_per_op + bytes / blender.bytes_per_cycle`` for a blender
-program. A depth or stencil result reaches the core ``rop.latency`` +
-interconnect cycles after commit.
+``1 / rop.ops_per_cycle`` cycles for fixed-function operations and the
+blender's program time for ``program_blend``. A depth or stencil result
+reaches the core ``rop.latency`` + interconnect cycles after commit.
 """
 
 from __future__ import annotations
 
 import operator
+from dataclasses import dataclass
 
 import numpy as np
 
-from gpusim.hw.lower import ROP, Program
-from gpusim.hw.units import FP, Signal, Unit, UnitStat, fp_cost
+from gpusim.config import param
+from gpusim.hw.unit import BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, fp_cost, interleave, register_unit
 from gpusim.opplan import OPS
 
 PROGRAM_BLEND = OPS.index("program_blend")
 
 
-class RopUnits(Unit):
+@dataclass(frozen=True)
+class RopConfig:
+    """ROP units with a reorder buffer (fixed-function blend, depth test, stencil)."""
+
+    units: int = param(32, unit="ROPs", doc="ROP units (pixels interleaved across them by address)", min=1)
+    reorder_entries: int = param(64, unit="fragments", doc="reorder-buffer entries per ROP unit; a full "
+                                 "buffer stalls the core", min=1)
+    ops_per_cycle: float = param(0.5, unit="fragments/cycle", doc="operations committed per ROP unit per "
+                                 "shader cycle", gt=0)
+    latency: int = param(100, unit="cycles", doc="latency from commit to the framebuffer write landing", min=0)
+
+
+@register_unit
+class RopUnit(Unit):
     name = "rop"
+    Config = RopConfig
+    issued = frozenset({"blend", "depth_test", "stencil", "program_blend"})
+    STATS = (BUSY, REQUESTS, UTILISATION,
+             Stat("max_reorder_occupancy", "entries", "most operations waiting in the reorder buffer"),
+             Stat("stalls", "stalls", "warp instructions stalled by a full buffer", per_instance=False))
     COUNTERS = {"stalls": operator.add, "max_held": max}     # changed by a run; merged across processes
 
-    def __init__(self, gpu, program: Program, fire):
-        units = gpu.rop.units
-        super().__init__(units)
-        self.gpu, self.fire = gpu, fire      # fire(signal): wake the warps waiting on it
-        self.icn, self.lat = gpu.memory.interconnect_latency, gpu.rop.latency
-        self.C = gpu.rop.reorder_entries
-        _, _, wi_row = program.storage(ROP)
-        self.row_pass = program.wi_pass[wi_row]
-        R = program.rows_of(ROP)
+    def __init__(self, config: RopConfig, machine):
+        super().__init__(config.units)
+        self.env = machine.env
+        mem = machine.gpu.memory
+        self.icn, self.latency, self.entries = mem.interconnect_latency, config.latency, config.reorder_entries
+        prog = machine.program
+        _, _, wi_row = prog.storage(self.name)
+        self.row_pass = prog.wi_pass[wi_row]
+        R = prog.rows_of(self.name)
         n = len(R)
         addr = R.address
-        unit = (addr // gpu.memory.interleave_bytes) % units
-        # the previous operation on the same address, in submission order
-        # submission order on one address: pass, fragment, then program order inside the thread
-        order = np.lexsort((program.wi_k[wi_row], program.wi_group[wi_row], R.thread, program.wi_pass[wi_row],
-                            addr))
+        unit = interleave(addr, mem.interleave_bytes, config.units)
+        # the previous operation on the same address in submission order: pass, fragment, then program order
+        order = np.lexsort((prog.wi_k[wi_row], prog.wi_group[wi_row], R.thread, prog.wi_pass[wi_row], addr))
         pred = np.full(n, -1, np.int64)
         same = np.r_[False, addr[order][1:] == addr[order][:-1]] if n else np.zeros(0, bool)
         pred[order[same]] = order[np.flatnonzero(same) - 1]
-        fixed = fp_cost(1, gpu.rop.ops_per_cycle)
-        b = gpu.blender
-        prog_blend = R.op == PROGRAM_BLEND
-        service = np.where(prog_blend, b.cycles_per_op * FP + np.ceil(R.nbytes * FP
-                                                                        / b.bytes_per_cycle).astype(np.int64),
-                           fixed)
-        self.blender_ops = int(prog_blend.sum())
-        self.busy_fp = np.bincount(unit, weights=service, minlength=units).astype(np.int64).tolist()
-        self.requests = np.bincount(unit, minlength=units).tolist()
+        service = np.full(n, fp_cost(1, config.ops_per_cycle), np.int64)
+        programs = R.op == PROGRAM_BLEND
+        if programs.any():
+            service[programs] = machine.units["blender"].service_fp(R.nbytes[programs], addr[programs])
+        self.busy_fp = np.bincount(unit, weights=service, minlength=config.units).astype(np.int64).tolist()
+        self.requests = np.bincount(unit, minlength=config.units).tolist()
         self.unit, self.pred, self.service = unit.tolist(), pred.tolist(), service.tolist()
+        self.produces = prog.wi_produces.tolist()
         self.commit = [-1] * n                   # cycle, once known
         self.arrive = [-1] * n
-        self.free = [0] * units                  # sub-cycles
-        self.held = [0] * units                  # reorder-buffer entries in use
-        self.max_held = [0] * units
+        self.free = [0] * config.units           # sub-cycles
+        self.held = [0] * config.units           # reorder-buffer entries in use
+        self.max_held = [0] * config.units
         self.stalls = 0
-        self.waiting_on: dict[int, list[int]] = {}
-        self.commit_events: dict[int, object] = {}
-        self.space = [None] * units
+        self.waiting_on: dict[int, list[int]] = {}     # operation -> operations waiting for its commit
+        self.commit_events: dict[int, object] = {}     # operation -> event a warp waits on for its result
+        self.space = [None] * config.units             # event a warp waits on for a free entry
         self.drain = 0
-        self.lo, self.hi = program.row_bounds    # instruction -> its rows
+        self.lo, self.hi = prog.row_bounds        # instruction -> its rows
         self.placed: dict[int, int] = {}          # instruction -> lanes placed so far
 
-    def access(self, wi: int, t: int, now: int, produces: bool):
-        """(cycle the warp may go on, cycle the result is back), or a Signal to wait on and retry at ``now``
-        (``t``: the cycle the instruction issued)."""
+    def serve(self, wi: int, now: int):
+        """The cycle the result is back (a depth or stencil test), or ``now`` when the warp need not wait; or
+        an event to wait for (a free reorder-buffer entry, the result's commit) before issuing again."""
         a, b = self.lo[wi], self.hi[wi]
-        done = self.placed.get(wi, a)
-        for i in range(done, b):
+        for i in range(self.placed.get(wi, a), b):
             p = self.pred[i]
             if p >= 0 and self.commit[p] < 0:             # must wait for the previous op on its address
                 u = self.unit[i]
-                if self.held[u] >= self.C:                # full: the warp stalls
+                if self.held[u] >= self.entries:          # full: the warp stalls
                     self.placed[wi] = i
                     self.stalls += 1
                     if self.space[u] is None:
-                        self.space[u] = Signal()
+                        self.space[u] = self.env.event()
                     return self.space[u]
                 self.held[u] += 1
-                self.max_held[u] = max(self.max_held[u], self.held[u])
+                if self.held[u] > self.max_held[u]:
+                    self.max_held[u] = self.held[u]
                 self.arrive[i] = now + self.icn
                 self.waiting_on.setdefault(p, []).append(i)
             else:
                 self.arrive[i] = now + self.icn
                 self._commit(i)
         self.placed[wi] = b
-        go = max(t, now)          # a warp stalled by a full buffer goes on once it is placed
-        if not produces:
-            return go, go
-        value = go
+        if not self.produces[wi]:
+            return now
+        value = now
         for i in range(a, b):
             if self.commit[i] < 0:
                 ev = self.commit_events.get(i)
                 if ev is None:
-                    ev = self.commit_events[i] = Signal()
+                    ev = self.commit_events[i] = self.env.event()
                 return ev
-            value = max(value, self.commit[i] + self.lat + self.icn)
-        return go, value
+            value = max(value, self.commit[i] + self.latency + self.icn)
+        return value
 
     def _commit(self, i: int) -> None:
+        """Commit operation ``i`` and every operation waiting in a buffer that can follow it."""
         stack = [i]
         while stack:
             i = stack.pop()
@@ -122,22 +136,23 @@ class RopUnits(Unit):
             end = start + self.service[i]
             self.free[u] = end
             self.commit[i] = c = -(-end // FP)
-            if c + self.lat > self.drain:
-                self.drain = c + self.lat
+            if c + self.latency > self.drain:
+                self.drain = c + self.latency
             ev = self.commit_events.pop(i, None)
             if ev is not None:
-                self.fire(ev)
+                ev.succeed()
             for k in self.waiting_on.pop(i, ()):
                 uk = self.unit[k]
                 self.held[uk] -= 1
                 if self.space[uk] is not None:
-                    self.fire(self.space[uk])
+                    self.space[uk].succeed()
                     self.space[uk] = None
                 stack.append(k)
 
-    def assume_committed(self, indices) -> None:
-        """Only the passes ``indices`` run here: operations of the others count as committed long before
-        (a pass starts after the previous one drained, so that is all an operation sees of them)."""
+    def only_passes(self, indices) -> None:
+        """Only the passes ``indices`` run here (gpusim.hw.parallel): operations of the others count as
+        committed long before (a pass starts after the previous one drained, so that is all an operation
+        sees of them)."""
         self.commit = np.where(np.isin(self.row_pass, list(indices)), -1, 0).tolist()
 
     def idle_at(self) -> int:
@@ -145,26 +160,23 @@ class RopUnits(Unit):
         return self.drain
 
     def blocked(self) -> list[str]:
-        """What the units are stuck on (no-progress diagnosis)."""
         out = []
         for u in range(self.instances):
             if self.space[u] is not None or self.held[u]:
-                out.append(f"rop[{u}] reorder buffer: {self.held[u]}/{self.C} entries hold operations waiting for "
-                           f"an earlier operation on their pixel that has not arrived"
+                out.append(f"rop[{u}] reorder buffer: {self.held[u]}/{self.entries} entries hold operations "
+                           f"waiting for an earlier operation on their pixel that has not arrived"
                            + ("; a warp waits for a free entry" if self.space[u] is not None else ""))
         if self.commit_events:
             out.append(f"rop: {len(self.commit_events)} warp(s) wait for a depth/stencil result")
         return out[:4] + ([f"... {len(out) - 4} more"] if len(out) > 4 else [])
 
-    def stats(self, total_cycles):
-        rows = super().stats(total_cycles)
-        for u in range(self.instances):
-            rows.append(UnitStat(self.name, "max_reorder_occupancy", self.max_held[u], "entries",
-                                 "most operations waiting in the reorder buffer", u))
-        rows.append(UnitStat(self.name, "stalls", self.stalls, "stalls", "warp instructions stalled by a full buffer"))
-        return rows
+    def line_trace(self) -> str:
+        return "rop: held " + " ".join(f"[{u}]{h}/{self.entries}" for u, h in enumerate(self.held[:8])) \
+            + f" stalls={self.stalls}"
 
-    def summary(self, total_cycles):
-        return super().summary(total_cycles) | {"reorder_entries": self.C, "stalls": self.stalls,
-                                                "max_reorder_occupancy": int(max(self.max_held)),
-                                                "blender_ops": self.blender_ops}
+    def values(self, total_cycles: int) -> dict:
+        return super().values(total_cycles) | {"max_reorder_occupancy": list(self.max_held), "stalls": self.stalls}
+
+    def summary(self, total_cycles: int) -> dict:
+        return super().summary(total_cycles) | {"reorder_entries": self.entries, "stalls": self.stalls,
+                                                "max_reorder_occupancy": int(max(self.max_held))}

@@ -1,4 +1,4 @@
-"""The fidelity levels of the timing model: ``analytic``, ``sampled`` and ``full``.
+"""The fidelity levels of the timing model: ``analytic``, ``sampled``, ``full`` (and ``thesis``).
 
 * ``full``: the event model (gpusim.hw.machine) on every operation.
 * ``sampled``: the event model on the operations of a random sample of
@@ -20,13 +20,15 @@ hazards, and the units built (a unit no operation reaches is not built).
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 
 import numpy as np
 
 from gpusim.hw.hazards import count_hazards, rmw_windows
-from gpusim.hw.lower import Program, Workload, lower
+from gpusim.hw.gpu import with_section
+from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine
+from gpusim.hw.program import Program
+from gpusim.hw.thesis import thesis_timing
 
 
 def _base(gpu, fidelity: str, program: Program, n_ops: int) -> dict:
@@ -40,17 +42,18 @@ def _finish(rec: dict, gpu, cycles: int) -> dict:
     return rec
 
 
-def _hazards(rec: dict, program: Program, machine: Machine, work: Workload, result, reference, scale=1.0):
+def _hazards(rec: dict, program: Program, machine: Machine, work: Workload, result, reference):
     """RMW hazards from the event times, and the image replayed in event order."""
     rec["rmw_hazards"], rec["rmw_hazard_pixels"] = 0, 0
-    sample = machine.partitions.sample() if machine.partitions is not None else None
-    if sample is None or not (sample >= 0).any():
+    coalescer = machine.units.get("coalescer")
+    service = coalescer.rmw_service_cycles() if coalescer is not None else None
+    if service is None or not (service >= 0).any():
         return None
-    read, write = rmw_windows(program, sample, len(work.frag_pixel))
+    read, write = rmw_windows(program, service, len(work.frag_pixel))
     h, hp = count_hazards(work.frag_pixel, read, write)
-    rec["rmw_hazards"], rec["rmw_hazard_pixels"] = int(round(h * scale)), int(round(hp * scale))
+    rec["rmw_hazards"], rec["rmw_hazard_pixels"] = int(h), int(hp)
     replay = result.extras.get("rmw_replay") if result is not None else None
-    if replay is None or scale != 1.0:
+    if replay is None:
         return None
     image, stats = replay(read, write)
     if reference is not None:
@@ -136,7 +139,7 @@ def _sample_run(work: Workload, gpu, keep):
     program = lower(work, gpu, keep)
     kept, total = sum(p.operations for p in program.passes), sum(p.operations_total for p in program.passes)
     share = max(1, kept) / max(1, total)
-    sample_gpu = replace(gpu, raster=replace(gpu.raster, triangles_per_cycle=gpu.raster.triangles_per_cycle / share))
+    sample_gpu = with_section(gpu, "raster", triangles_per_cycle=gpu.raster.triangles_per_cycle / share)
     rec, _ = run_full(work, sample_gpu, program=program)
     return rec, program
 
@@ -191,4 +194,17 @@ def run_analytic(work, gpu, result=None, reference=None) -> tuple[dict, None]:
     return _finish(rec, gpu, rec.pop("total")), None
 
 
-LEVELS = {"analytic": run_analytic, "sampled": run_sampled, "full": run_full}
+def _on_workload(run, name: str):
+    def level(result, trace, gpu, reference=None):
+        return run(Workload.of(result, trace), gpu, result, reference)
+    level.__name__ = f"{name}_timing"
+    return level
+
+
+def _thesis(result, trace=None, gpu=None, reference=None):
+    return thesis_timing(result), None
+
+
+#: the fidelity levels by name: ``level(result, trace, gpu, reference) -> (record, timed image or None)``
+FIDELITIES = {"analytic": _on_workload(run_analytic, "analytic"), "sampled": _on_workload(run_sampled, "sampled"),
+              "full": _on_workload(run_full, "full"), "thesis": _thesis}

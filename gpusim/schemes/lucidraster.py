@@ -57,7 +57,7 @@ LOW_SCRATCH = 4 * 1024 * TRI_BLOCK_ROW_BYTES + 16 * 256 * 2 * TRI_HALF_BLOCK_BYT
 HIGH_SCRATCH = 768 * 1024
 SEGMENT = 256                # samples per segment in phase 3
 DEPTH_BITS = 22
-ALPHA_LIMIT = 1.0 - 1.0 / 128
+TRANSMITTANCE_LIMIT = np.float32(1.0 / 128)   # a pixel is opaque once blended alpha reaches 1 - 1/128
 
 
 def sorted_arrival(pix, centroid_key, tb_block, tb_tri, tb_of_frag):
@@ -70,7 +70,7 @@ def sorted_arrival(pix, centroid_key, tb_block, tb_tri, tb_of_frag):
 
 
 def crossing_arrival(pix, emitted, steps, alpha, count):
-    """Per pixel: the arrival rank whose arrival made blended alpha reach ALPHA_LIMIT (-1: never)."""
+    """Per pixel: the arrival rank whose arrival made blended alpha reach 1 - 1/128 (-1: never)."""
     out = np.full(len(count), -1, np.int64)
     if len(emitted) == 0:
         return out
@@ -78,7 +78,7 @@ def crossing_arrival(pix, emitted, steps, alpha, count):
     covered = pix[emitted][start]
     trans = np.ones(len(start), np.float32)
     done = np.zeros(len(start), bool)
-    limit = np.float32(1.0 / 128)
+    limit = TRANSMITTANCE_LIMIT
     for k, m in enumerate(active):
         idx = start[:m] + k
         trans[:m] *= np.float32(1.0) - alpha[emitted[idx]]

@@ -25,8 +25,6 @@ EMPTY = np.uint32(0xFFFFFFFF)
 #: Largest binary32 value below 1.0; packing clamps 0.5 + 0.5 z to it (z = 1 would
 #: otherwise change the exponent and wrap to the key of z = 0).
 _BELOW_ONE = np.nextafter(np.float32(1.0), np.float32(0.0))
-PACK_DEPTH_BITS = 20
-PACK_FREE_BITS = 12
 
 
 def depth_key(z: np.ndarray) -> np.ndarray:

@@ -81,13 +81,6 @@ def place(pix: np.ndarray, by_arrival: np.ndarray, n: int, capacity: int,
     return Placement(kept, chain, slot, before, early)
 
 
-def allocation_ids(opener_fragments: np.ndarray) -> np.ndarray:
-    """Section id of each opening fragment: sections are handed out in submission order."""
-    ids = np.empty(len(opener_fragments), np.int64)
-    ids[np.argsort(opener_fragments, kind="stable")] = np.arange(len(opener_fragments))
-    return ids
-
-
 class SectionIndex:
     """Look up the section id of (pixel, position in the pixel's chain)."""
 

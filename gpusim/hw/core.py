@@ -1,0 +1,186 @@
+"""SIMT cores (streaming multiprocessors): warps, their scheduler, the issue port, latency hiding.
+
+Each SM runs up to ``core.warps_per_sm`` resident warps. A pass's warps go to
+the SMs round robin in submission order (:meth:`SimtCore.place`, the one place
+SM placement is decided; every stat and the analytic level use it), and a
+finished warp's slot takes its SM's next warp. Each resident-warp slot is a
+simpy process that runs its warps one after the other.
+
+A warp issues its instructions in program order through its SM's issue port
+(warps take the port in the order they ask for it). A memory instruction and
+the ``core.instructions_per_op`` ALU instructions around it hold the port for
+``issue_cycles * (1 + instructions_per_op)`` cycles; a :class:`Compute`
+instruction (triangle setup) for its own cycles. An instruction that depends
+on the thread's previous result waits for it, and other warps of the SM issue
+meanwhile (latency hiding). A unit that cannot take an instruction yet (a full
+reorder buffer, a busy scoreboard cell) hands back a simpy event; the warp
+waits for it and issues the instruction again.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.hw.program import COMPUTE
+from gpusim.hw.unit import Unit, occupancy_stats, register_unit
+
+
+@dataclass(frozen=True)
+class CoreConfig:
+    """SIMT cores (streaming multiprocessors) and their warp schedulers."""
+
+    sms: int = param(30, unit="SMs", doc="streaming multiprocessors", min=1)
+    warp_size: int = param(32, unit="threads", doc="threads per warp", min=1, max=1024)
+    lanes_per_sm: int = param(8, unit="lanes", doc="scalar lanes per SM (a warp instruction issues over "
+                              "warp_size / lanes_per_sm cycles)", min=1)
+    warps_per_sm: int = param(32, unit="warps", doc="resident warps per SM (latency hiding)", min=1)
+    clock_mhz: float = param(1296.0, unit="MHz", doc="shader clock: the model's cycle", gt=0)
+    instructions_per_op: int = param(4, unit="instructions", doc="ALU instructions a thread issues per memory "
+                                     "operation (address arithmetic, the shader or rasterizer work around it)",
+                                     min=0)
+    thread_mapping: Literal["auto", "fragment", "triangle"] = param(
+        "auto", doc="thread of a geometry pass: one per fragment, one per triangle (FreePipe: the thread "
+                    "rasterizes its triangle and issues its fragments' operations in turn), or auto "
+                    "(triangle for software-pipeline passes, fragment for the graphics pipeline)")
+    pipeline_latency: int = param(200, unit="cycles", doc="cycles to drain the pipeline at a flush "
+                                  "(a pass boundary that waits for all work)", min=0)
+
+    @property
+    def issue_cycles(self) -> int:
+        """Cycles one warp instruction occupies the SM's issue port."""
+        return -(-self.warp_size // self.lanes_per_sm)
+
+    @property
+    def op_issue_cycles(self) -> int:
+        """Issue-port cycles of a memory instruction and the ALU instructions around it."""
+        return self.issue_cycles * (1 + self.instructions_per_op)
+
+
+@register_unit
+class SimtCore(Unit):
+    """The SMs of the GPU; one instance per SM."""
+
+    name = "core"
+    Config = CoreConfig
+    STATS = occupancy_stats("cycles the SM's issue port was held", "instructions",
+                            "warp instructions issued (memory and compute)")
+
+    def __init__(self, config: CoreConfig, machine):
+        super().__init__(config.sms)
+        self.config, self.machine, self.env = config, machine, machine.env
+        prog = machine.program
+        self.sm_free = [0] * config.sms              # cycle each SM's issue port is free
+        self.last_progress = 0                       # cycle of the last issue
+        self.done = 0                                # cycle the pass's last operation completes
+        self.waiting: dict[int, tuple] = {}          # warp -> (pass, SM, instruction, unit) it waits on
+        # per instruction, as lists (indexed once per instruction)
+        self._unit = prog.wi_unit.tolist()
+        self._dep = prog.wi_dep.tolist()
+        self._produces = prog.wi_produces.tolist()
+        self._cycles = prog.wi_cycles.tolist()
+        # port occupancy and instructions per SM (static: where each warp runs is fixed)
+        sm = np.zeros(prog.instructions, np.int64)
+        for p in prog.passes:
+            if p.warps:
+                lo, hi = int(p.wi_start[0]), int(p.wi_start[-1])
+                sm[lo:hi] = self.place(p.warps, config.sms)[prog.wi_warp[lo:hi] - p.first_warp]
+        cyc = prog.wi_cycles
+        self.busy_fp = (np.bincount(sm, weights=cyc, minlength=config.sms) * (1 << 16)).astype(np.int64).tolist()
+        self.requests = np.bincount(sm, minlength=config.sms).tolist()
+
+    @staticmethod
+    def place(warps: int, sms: int) -> np.ndarray:
+        """The SM of each of a pass's ``warps`` (round robin in submission order)."""
+        return np.arange(warps, dtype=np.int64) % sms
+
+    def flush_cycles(self, warps: int) -> int:
+        return flush_cycles(self.config, warps)
+
+    def start_pass(self, p, ready, serve: list) -> list:
+        """Start the slot processes of pass ``p`` at the current cycle; the processes.
+
+        ``ready[w]``: the cycle warp ``w`` (in the pass) may start (its triangles rasterized), or None;
+        ``serve[u]``: the ``serve`` method of unit ``u`` of the program."""
+        sms, slots = self.config.sms, self.config.warps_per_sm
+        sm_of = self.place(p.warps, sms)
+        by_sm = np.argsort(sm_of, kind="stable")
+        bounds = np.searchsorted(sm_of[by_sm], np.arange(sms + 1)).tolist()
+        wi_start = p.wi_start.tolist()
+        procs = []
+        for sm in range(sms):
+            queue = deque(by_sm[bounds[sm]:bounds[sm + 1]].tolist())     # the SM's warps in submission order
+            for _ in range(min(slots, len(queue))):
+                procs.append(self.env.process(self._slot(p, sm, queue, wi_start, ready, serve)))
+        return procs
+
+    def _slot(self, p, sm: int, queue: deque, wi_start: list, ready, serve: list):
+        """One resident-warp slot of SM ``sm``: takes the SM's next waiting warp until none is left.
+
+        Times are integers and a timeout of ``d`` resumes exactly ``d`` later, so ``now`` is kept here and
+        read from the environment only after waiting on a unit's event."""
+        env = self.env
+        timeout = env.timeout
+        unit_of, dep_of, prod_of, cyc_of = self._unit, self._dep, self._produces, self._cycles
+        sm_free = self.sm_free
+        hooks = self.machine.warp_end_hooks
+        first = p.first_warp
+        while queue:
+            w = queue.popleft()
+            now = env.now
+            t = ready[w] if ready is not None and ready[w] > now else now
+            yield timeout(t - now)                   # a queue entry even at once: warps start in order
+            now = t
+            value = done = now
+            for wi in range(wi_start[w], wi_start[w + 1]):
+                u = unit_of[wi]
+                if u == COMPUTE:                     # ALU work: holds the port, the next instruction waits
+                    f = sm_free[sm]
+                    sm_free[sm] = (f if f > now else now) + cyc_of[wi]
+                    continue
+                if dep_of[wi] and value > now:       # wait for the result it depends on
+                    yield timeout(value - now)
+                    now = value
+                f = sm_free[sm]
+                if f > now:                          # the issue port is taken until f
+                    sm_free[sm] = f + cyc_of[wi]
+                    yield timeout(f - now)
+                    now = f
+                else:
+                    sm_free[sm] = now + cyc_of[wi]
+                d = serve[u](wi, now)
+                while type(d) is not int:            # the unit cannot take it yet: wait, then issue again
+                    self.waiting[first + w] = (p.name, sm, wi, self.machine.program.units[u])
+                    yield d
+                    del self.waiting[first + w]
+                    now = env.now
+                    d = serve[u](wi, now)
+                self.last_progress = now
+                if prod_of[wi]:
+                    value = d
+                if d > done:
+                    done = d
+            if done > self.done:
+                self.done = done
+            for hook in hooks:
+                hook(first + w, done)
+
+    def idle_at(self) -> int:
+        return max(self.sm_free)
+
+    def summary(self, total_cycles: int) -> dict:
+        return super().summary(total_cycles)
+
+    def line_trace(self) -> str:
+        return (f"core: last issue at {self.last_progress} waiting={len(self.waiting)} "
+                + " ".join(f"[{i}] free={f}" for i, f in enumerate(self.sm_free[:8])))
+
+
+def flush_cycles(core: CoreConfig, warps: int) -> int:
+    """A flush: drain the pipeline, then a full-screen quad of ``warps`` ALU-only warps on the SMs."""
+    per_sm = -(-warps // core.sms)
+    return core.pipeline_latency + per_sm * core.op_issue_cycles

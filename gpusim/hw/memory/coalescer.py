@@ -1,0 +1,165 @@
+"""The coalescer: a warp instruction's lanes become memory requests.
+
+Lanes touching one ``coalescer.segment_bytes`` segment make one request, of
+the bytes they touch rounded up to 32-byte sectors (at most the segment); an
+access wider than a segment touches several. Requests go to partition
+``(address // memory.interleave_bytes) % memory.partitions`` and on to the
+next level after ``memory.interconnect_latency``; the result is back at the
+core that long after the last request is served.
+
+``rmw_read`` / ``rmw_write`` instructions get the sub-cycle each partition
+started serving them (the moment a read samples memory and a write lands), for
+the RMW-hazard analysis (gpusim.hw.hazards).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.hw.memory.level import MEMORY_OPS, SECTOR, MemoryLevel, Requests
+from gpusim.hw.unit import Stat, cycles, div, interleave, mod, register_unit
+from gpusim.metrics.composite import run_starts
+from gpusim.opplan import OPS
+
+WRITE_OPS = ("store", "rmw_write")
+RMW_OPS = ("rmw_read", "rmw_write")
+
+
+@dataclass(frozen=True)
+class CoalescerConfig:
+    """Coalescing of a warp's accesses into requests."""
+
+    segment_bytes: int = param(64, unit="bytes", doc="coalescing segment: a warp's accesses to one segment "
+                               "become one request", min=1)
+
+
+@register_unit
+class Coalescer(MemoryLevel):
+    name = "coalescer"
+    Config = CoalescerConfig
+    issued = MEMORY_OPS
+    STATS = (Stat("requests", "requests", "coalesced requests sent to the partition"),
+             Stat("bytes", "bytes", "bytes requested from the partition (whole sectors)"))
+    COUNTERS: dict = {}
+
+    def __init__(self, config: CoalescerConfig, machine):
+        super().__init__(machine)
+        self.segment = config.segment_bytes
+        mem = machine.gpu.memory
+        self.icn, self.interleave = mem.interconnect_latency, mem.interleave_bytes
+        prog = self.program = machine.program
+        # rmw instructions: the sub-cycle each partition started serving them (None without unsynchronised RMW)
+        self.rmw_starts: dict[int, list] | None = None
+        self.rmw_merged: list = []          # (instructions, starts) served in other processes (gpusim.hw.parallel)
+        self.bytes = [0] * self.instances
+        wis, counts, _ = prog.storage(self.name)
+        write = np.isin(prog.wi_op, [OPS.index(o) for o in WRITE_OPS])
+        self._rmw = np.isin(prog.wi_op, [OPS.index(o) for o in RMW_OPS]).tolist()
+        if any(self._rmw):
+            self.rmw_starts = {}
+        if not len(wis):
+            return
+        R = prog.rows_of(self.name)
+        los = prog.row_lo[wis]
+        # part by part (arrays the allocator reuses), or all rows at once when there are many small parts
+        # (a k-buffer batch run: thousands), where numpy's per-call cost would dominate
+        parts = (zip(R.parts, R.offsets()) if len(R.parts) <= 64
+                 else [((None, R.address, R.nbytes, None), 0)])
+        chunks = [q for part, off in parts for q in self._requests(part, off, los, counts, wis)]
+        for q in chunks:
+            self.requests = (np.asarray(self.requests) + np.bincount(q.partition, minlength=self.instances)).tolist()
+            self.bytes = (np.asarray(self.bytes) + np.bincount(q.partition, weights=q.nbytes,
+                                                               minlength=self.instances)).astype(np.int64).tolist()
+        self.next.prepare(chunks, write)
+
+    def _requests(self, part, off: int, los: np.ndarray, counts: np.ndarray, wis: np.ndarray,
+                  chunk: int = 1 << 20) -> list[Requests]:
+        """Coalesced requests of one part of the rows, a chunk of whole instructions at a time (arrays small
+        enough for the allocator to reuse)."""
+        _, address, nbytes, _ = part
+        a, b = np.searchsorted(los, [off, off + len(address)])
+        ends = np.cumsum(counts[a:b])
+        out = []
+        S = self.segment
+        lo = 0
+        while lo < b - a:
+            hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + chunk, side="right")))
+            r0, r1 = (ends[lo - 1] if lo else 0), ends[hi - 1]
+            addr = address[r0:r1]
+            nb = max(int(nbytes), 1) if np.isscalar(nbytes) else np.maximum(nbytes[r0:r1], 1)
+            rank = np.repeat(np.arange(a + lo, a + hi), counts[a + lo:a + hi])
+            seg = div(addr, S)
+            if (mod(addr, S) + nb > S).any():       # an access wider than a segment touches several
+                nb = np.broadcast_to(nb, addr.shape)
+                span = div(addr + nb - 1, S) - seg + 1
+                k = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
+                rank, addr, nb = np.repeat(rank, span), np.repeat(addr, span), np.repeat(nb, span)
+                seg = np.repeat(seg, span) + k
+                nb = np.minimum(addr + nb, (seg + 1) * S) - np.maximum(addr, seg * S)
+            # one request per (instruction, segment); lanes in address order (the common case) need no sort
+            key = (rank << 36) | seg
+            if len(key) > 1 and not (key[1:] >= key[:-1]).all():
+                order = np.argsort(key, kind="stable")
+                key = key[order]
+                if not np.isscalar(nb):
+                    nb = nb[order]
+            starts = run_starts(key)
+            touched = (np.add.reduceat(nb, starts) if not np.isscalar(nb)
+                       else np.diff(np.append(starts, len(key))) * nb)
+            req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(S, SECTOR))
+            key = key[starts]
+            seg_addr = (key & ((1 << 36) - 1)) * S
+            out.append(Requests(key >> 36, wis, interleave(seg_addr, self.interleave, self.instances), seg_addr,
+                                req_bytes))
+            lo = hi
+        return out
+
+    def serve(self, wi: int, now: int) -> int:
+        """Instruction ``wi`` issued at cycle ``now``: the cycle its last request is back at the core."""
+        arrive = (now + self.icn) * (1 << 16)
+        if self._rmw[wi]:
+            starts = [-1] * self.instances
+            done = self.next.access(wi, arrive, starts)
+            self.rmw_starts[wi] = starts
+        else:
+            done = self.next.access(wi, arrive, None)
+        return done + self.icn
+
+    def values(self, total_cycles: int) -> dict:
+        return {"requests": list(self.requests), "bytes": list(self.bytes)}
+
+    def summary(self, total_cycles: int) -> dict:
+        return {"instances": self.instances, "requests": int(sum(self.requests)), "bytes": int(sum(self.bytes))}
+
+    def idle_at(self) -> int:
+        return 0
+
+    def line_trace(self) -> str:
+        return "coalescer: -"            # no state of its own: it times nothing
+
+    def rmw_service_cycles(self) -> np.ndarray | None:
+        """Per row of the memory instructions: the cycle an ``rmw_read`` sampled memory or an ``rmw_write``
+        landed (its partition started serving it), -1 for other rows; None without RMW instructions."""
+        if self.rmw_starts is None:
+            return None
+        prog = self.program
+        R = prog.rows_of(self.name)
+        out = np.full(len(R), -1, np.int64)
+        wis, starts = self.rmw_start_arrays()
+        if len(wis):
+            lo, counts = prog.row_lo[wis], prog.row_hi[wis] - prog.row_lo[wis]
+            k = np.repeat(np.arange(len(wis)), counts)
+            rows = np.arange(len(k)) - np.repeat(np.cumsum(counts) - counts, counts) + lo[k]
+            part = interleave(R.address[rows], self.interleave, self.instances)
+            out[rows] = cycles(starts[k, part])
+        return out
+
+    def rmw_start_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The RMW instructions served so far and, per partition, the sub-cycle each started serving them."""
+        P = self.instances
+        got = [(np.fromiter(self.rmw_starts, np.int64, len(self.rmw_starts)),
+                np.array(list(self.rmw_starts.values()), np.int64).reshape(-1, P))] + self.rmw_merged
+        return np.concatenate([w for w, _ in got]), np.concatenate([a for _, a in got])

@@ -1,0 +1,94 @@
+"""DRAM channels, one per memory partition.
+
+Requests that reach a channel straight from the coalescer are served an
+instruction at a time: an instruction's requests to one partition back to
+back, ``bytes / dram.bytes_per_cycle`` together, from when they arrive or the
+channel frees; they complete ``dram.latency`` later. A request from a level
+above (an L2 miss, with any dirty line it evicts) is served on its own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.hw.memory.level import MemoryLevel, Requests
+from gpusim.hw.unit import FP, div, fp_costs, mod, register_unit
+
+
+@dataclass(frozen=True)
+class DramConfig:
+    """One DRAM channel per partition."""
+
+    bytes_per_cycle: float = param(13.67, unit="bytes/cycle", doc="channel bandwidth per shader cycle", gt=0)
+    latency: int = param(400, unit="cycles", doc="access latency (row activation, CAS, return)", min=0)
+
+
+@register_unit
+class DramChannel(MemoryLevel):
+    name = "dram"
+    Config = DramConfig
+    terminal = True
+
+    def __init__(self, config: DramConfig, machine):
+        super().__init__(machine)
+        self.rate, self.latency = config.bytes_per_cycle, config.latency
+        self._lo = self._hi = self._part = self._cost = None
+
+    def prepare(self, chunks: list[Requests], write: np.ndarray) -> None:
+        """Per (instruction, partition): the bytes of its requests, served together (dense over each chunk)."""
+        P = self.instances
+        cells, nbs, nreqs = [], [], []
+        for q in chunks:
+            r0 = int(q.rank[0])
+            cell = (q.rank - r0) * P + q.partition
+            span = (int(q.rank[-1]) - r0 + 1) * P
+            b_ = np.bincount(cell, weights=q.nbytes, minlength=span)
+            n_ = np.bincount(cell, minlength=span)
+            hit = np.flatnonzero(n_)
+            cells.append(hit + r0 * P)
+            nbs.append(b_[hit].astype(np.int64))     # whole bytes
+            nreqs.append(n_[hit])
+        if not chunks:
+            return
+        order = chunks[0].order
+        hit, nb, nreq = np.concatenate(cells), np.concatenate(nbs), np.concatenate(nreqs)
+        cost = fp_costs(nb, self.rate)
+        rank, part = div(hit, P), mod(hit, P)      # (instruction, partition) cells, in storage order
+        self.requests = np.bincount(part, weights=nreq, minlength=P).astype(np.int64).tolist()
+        self.busy_fp = np.bincount(part, weights=cost, minlength=P).astype(np.int64).tolist()
+        # instruction wi owns cells lo[wi]:hi[wi]
+        bounds = np.searchsorted(rank, np.arange(len(order) + 1))
+        n = len(write)
+        lo, hi = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        lo[order], hi[order] = bounds[:-1], bounds[1:]
+        self._lo, self._hi, self._part, self._cost = lo.tolist(), hi.tolist(), part.tolist(), cost.tolist()
+
+    def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
+        free, part, cost = self.free, self._part, self._cost
+        end = 0
+        for j in range(self._lo[wi], self._hi[wi]):
+            p = part[j]
+            e = free[p]
+            if e < arrive_fp:
+                e = arrive_fp
+            if starts is not None:
+                starts[p] = e                   # an instruction has one cell per partition it reaches
+            e += cost[j]
+            free[p] = e
+            if e > end:
+                end = e
+        return -(-end // FP) + self.latency
+
+    def request_costs(self, nbytes: np.ndarray) -> np.ndarray:
+        return fp_costs(nbytes, self.rate)
+
+    def serve_request(self, partition: int, cost_fp: int, at_fp: int) -> int:
+        free = self.free
+        start = free[partition] if free[partition] > at_fp else at_fp
+        free[partition] = start + cost_fp
+        self.busy_fp[partition] += cost_fp
+        self.requests[partition] += 1
+        return -(-(start + cost_fp) // FP) + self.latency

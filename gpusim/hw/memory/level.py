@@ -1,0 +1,104 @@
+"""The memory partitions and the interface of a memory level.
+
+Memory is a chain of levels from the core outwards, named by ``memory.levels``
+(default ``coalescer``, ``l2``, ``dram``); each level is a registered unit with
+its own config section, one instance per memory partition, and a ``next``
+level. A level that a config leaves out (an L2 of size 0) is skipped. To add a
+level, subclass :class:`MemoryLevel` in a module of its own, register it, and
+name it in ``memory.levels``:
+
+* ``prepare(chunks, write)``: the coalesced requests that reach the level
+  (:class:`Requests`, a run of whole instructions per chunk) before the run;
+  a level that passes requests on unchanged hands them to ``next.prepare``;
+* ``access(wi, arrive_fp, starts)``: serve instruction ``wi``'s requests
+  arriving at sub-cycle ``arrive_fp``; the cycle the last one is back at the
+  level's input. ``starts`` (a list per partition, or None) records the
+  sub-cycle each partition started serving them, for the RMW-hazard analysis;
+* ``request_costs(nbytes)`` and ``serve_request(partition, cost_fp, at_fp)``:
+  one request from the level above (an L2 miss), the cycle it is back.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.hw.unit import Unit, register_section
+
+MEMORY_OPS = frozenset({"load", "store", "rmw_read", "rmw_write"})
+SECTOR = 32     # bytes: the granularity of a request's size
+
+
+@dataclass(frozen=True)
+class MemoryConfig:
+    """Memory partitions: address interleaving, the core-partition interconnect, the memory path."""
+
+    partitions: int = param(8, unit="partitions", doc="memory partitions (each holds one instance of every "
+                            "memory level and one atomic unit)", min=1)
+    interleave_bytes: int = param(256, unit="bytes", doc="address interleave granularity across partitions",
+                                  min=1)
+    interconnect_latency: int = param(20, unit="cycles", doc="core to partition latency (each way)", min=0)
+    levels: tuple[str, ...] = param(("coalescer", "l2", "dram"), doc="the memory path from the core outwards: "
+                                    "registered memory levels, first the one that takes the core's requests, "
+                                    "last a memory")
+
+
+register_section("memory", MemoryConfig)
+
+
+@dataclass
+class Requests:
+    """Coalesced requests of a run of whole instructions, in the order the program stores them."""
+
+    rank: np.ndarray          # the position in ``order`` of each request's instruction (ascending)
+    order: np.ndarray         # the memory instructions in storage order (shared by every chunk)
+    partition: np.ndarray
+    address: np.ndarray       # byte address of the request's segment
+    nbytes: np.ndarray
+
+    @property
+    def wi(self) -> np.ndarray:
+        """The instruction of each request."""
+        return self.order[self.rank]
+
+
+class MemoryLevel(Unit):
+    """A level of the memory path, one instance per partition (see the module docstring)."""
+
+    reached = MEMORY_OPS
+    terminal: ClassVar[bool] = False          # a memory: requests end here
+    parent = "memory"
+
+    def __init__(self, machine):
+        super().__init__(machine.gpu.memory.partitions)
+        self.next: MemoryLevel | None = machine.level_after(self.name)
+        self.free = [0] * self.instances      # sub-cycle each instance is free
+
+    @classmethod
+    def needed(cls, program, gpu) -> bool:
+        return (cls.name in gpu.memory.levels and cls.present(getattr(gpu, cls.name))
+                and super().needed(program, gpu))
+
+    @classmethod
+    def present(cls, config) -> bool:
+        """Whether a config with this section has the level at all."""
+        return True
+
+    def prepare(self, chunks: list[Requests], write: np.ndarray) -> None:
+        """The requests reaching this level; ``write[wi]``: whether instruction ``wi`` writes."""
+        self.next.prepare(chunks, write)
+
+    def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
+        raise NotImplementedError
+
+    def request_costs(self, nbytes: np.ndarray) -> np.ndarray:
+        raise NotImplementedError(f"{self.name} cannot sit behind a level that sends single requests")
+
+    def serve_request(self, partition: int, cost_fp: int, at_fp: int) -> int:
+        raise NotImplementedError(f"{self.name} cannot sit behind a level that sends single requests")
+
+    def idle_at(self) -> int:
+        return -(-max(self.free) // (1 << 16))

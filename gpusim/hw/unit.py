@@ -1,0 +1,225 @@
+"""What every hardware unit shares: the unit interface, its registry, declared stats, sub-cycle time.
+
+A unit is one class (see the worked example in gpusim.hw):
+
+* ``name``: its registry name, which is also its TOML section in a GPU config;
+* ``Config``: its config dataclass (typed fields declared with
+  :func:`gpusim.config.param`: unit, bounds, description);
+* ``issued``: the operations (gpusim.opplan.OPS) the SIMT core issues to it;
+  ``reached``: operations that reach it through another unit (the L2 behind
+  the coalescer, the blender behind the ROP). A unit is built only when the
+  program holds one of these;
+* ``STATS``: its declared stats (:class:`Stat`: name, unit of measure,
+  description), each reported per instance;
+* ``__init__(config, machine)``: build from its section and the program
+  (``machine.program``), vectorised;
+* ``serve(wi, now)``: serve warp instruction ``wi`` issued at cycle ``now``:
+  the cycle its result is back at the core, or a simpy event the warp waits
+  for before it issues the instruction again (a full reorder buffer);
+* ``idle_at()``: the cycle it has finished everything it was given;
+* ``values(total_cycles)``: each declared stat's value (a list per instance).
+
+Time is integer cycles. A unit whose throughput is not a whole number of
+cycles per operation (13.67 bytes per cycle) keeps its occupancy in integer
+sub-cycles (``FP`` per cycle), so long runs accumulate no rounding: a request
+is served from ``max(arrival, free)`` for ``ceil(work * FP / rate)``
+sub-cycles, and the times handed back to the core are whole cycles (rounded
+up).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+FP = 1 << 16          # sub-cycles per cycle
+
+
+def fp_cost(work: float, rate: float) -> int:
+    """Sub-cycles to serve ``work`` units at ``rate`` units per cycle (at least one sub-cycle)."""
+    return max(1, math.ceil(work * FP / rate))
+
+
+def fp_costs(work, rate: float):
+    """:func:`fp_cost` of an array of whole work amounts (int64); a table lookup when they are small."""
+    work = np.asarray(work)
+    top = int(work.max()) if work.size else 0
+    if work.size > 4 * top and work.dtype.kind in "iu":
+        return fp_costs(np.arange(top + 1, dtype=np.float64), rate)[work]
+    return np.maximum(1, np.ceil(work * FP / rate)).astype(np.int64)
+
+
+def cycles(fp: int) -> int:
+    """Whole cycles covering ``fp`` sub-cycles."""
+    return -(-fp // FP)
+
+
+def div(a, d: int):
+    """``a // d`` for non-negative integer arrays (a shift when ``d`` is a power of two)."""
+    return a >> (d.bit_length() - 1) if d & (d - 1) == 0 else a // d
+
+
+def mod(a, d: int):
+    """``a % d`` for non-negative integer arrays (a mask when ``d`` is a power of two)."""
+    return a & (d - 1) if d & (d - 1) == 0 else a % d
+
+
+def interleave(address, granularity: int, instances: int):
+    """The instance serving each byte address when addresses are interleaved across ``instances`` in
+    blocks of ``granularity`` bytes: partitions, ROP units. The one address-to-unit map of the model."""
+    return mod(div(address, granularity), instances)
+
+
+def address_ids(addr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each address as a small integer id, and the operations per distinct address.
+
+    Dense (offset from the lowest address, the low bits no address uses shifted
+    out: byte addresses of 4-byte words become word numbers) when the addresses
+    lie close together; otherwise ranks among the distinct addresses (a sort).
+    """
+    if not len(addr):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    ids = addr - int(addr.min())
+    common = int(np.bitwise_or.reduce(ids))
+    if common:
+        ids = ids >> ((common & -common).bit_length() - 1)
+    if int(ids.max()) <= 16 * len(ids):
+        ops = np.bincount(ids)
+        return ids, ops[ops > 0]
+    uniq, ids = np.unique(addr, return_inverse=True)
+    return ids, np.bincount(ids, minlength=len(uniq))
+
+
+@dataclass(frozen=True)
+class Stat:
+    """A stat declared on a unit (gem5 style): its name, unit of measure and description. Instances are
+    labels of a value, never part of the name."""
+
+    name: str
+    unit: str
+    doc: str
+    per_instance: bool = True
+
+
+def occupancy_stats(busy: str, requests_unit: str, requests: str) -> tuple[Stat, Stat, Stat]:
+    """The stats every timed unit declares: busy cycles, requests and utilisation (busy / run cycles) per
+    instance, with the unit's own descriptions."""
+    return (Stat("busy_cycles", "cycles", busy), Stat("requests", requests_unit, requests),
+            Stat("utilisation", "1", "busy cycles / run cycles"))
+
+
+BUSY, REQUESTS, UTILISATION = occupancy_stats("cycles the instance was serving", "requests", "requests served")
+
+
+class Unit:
+    """Base of the hardware units: per-instance busy sub-cycles and request counts (see the module
+    docstring for the interface)."""
+
+    name: ClassVar[str] = "unit"
+    Config: ClassVar[type | None] = None
+    issued: ClassVar[frozenset] = frozenset()
+    reached: ClassVar[frozenset] = frozenset()
+    STATS: ClassVar[tuple[Stat, ...]] = (BUSY, REQUESTS, UTILISATION)
+    #: counters a run changes, merged across the processes of a parallel run (name -> how)
+    COUNTERS: ClassVar[dict] = {}
+    #: the unit above this one in the unit tree (``memory`` for a memory level), for its stats' path
+    parent: ClassVar[str] = ""
+
+    @classmethod
+    def path(cls) -> str:
+        """Where the unit sits in the unit tree: ``core``, ``memory.dram``, ``rop.blender``."""
+        return f"{cls.parent}.{cls.name}" if cls.parent else cls.name
+
+    def __init__(self, instances: int):
+        if instances < 1:
+            raise ValueError(f"{self.name}: instances must be >= 1")
+        self.instances = instances
+        self.busy_fp = [0] * instances
+        self.requests = [0] * instances
+
+    @classmethod
+    def needed(cls, program, gpu) -> bool:
+        """Whether a machine running ``program`` on ``gpu`` builds this unit: by default, when the program
+        issues an operation the unit takes or is reached by."""
+        return bool((cls.issued | cls.reached) & program.operation_names())
+
+    # the interface the core and the machine use
+    def serve(self, wi: int, now: int):
+        raise NotImplementedError
+
+    def idle_at(self) -> int:
+        return 0
+
+    def blocked(self) -> list[str]:
+        """What the unit is stuck on (the no-progress diagnosis)."""
+        return []
+
+    def values(self, total_cycles: int) -> dict[str, list | float]:
+        """Each declared stat's value: a list per instance, or one value."""
+        busy = [b / FP for b in self.busy_fp]
+        return {"busy_cycles": busy, "requests": list(self.requests),
+                "utilisation": [b / total_cycles if total_cycles else 0.0 for b in busy]}
+
+    def summary(self, total_cycles: int) -> dict:
+        """The unit over all its instances (``replay --json``'s ``timing.units``)."""
+        busy = [b / FP for b in self.busy_fp]
+        util = [b / total_cycles if total_cycles else 0.0 for b in busy]
+        return {"instances": self.instances, "requests": int(sum(self.requests)),
+                "busy_cycles": float(sum(busy)), "utilisation_mean": float(sum(util) / len(util)),
+                "utilisation_max": float(max(util))}
+
+    def line_trace(self) -> str:
+        """One line of the unit's state for debugging (PyMTL style): the cycle each of its first instances is
+        free (``runner.trace_every`` prints it as a run goes)."""
+        free = getattr(self, "free", None)
+        if free is None:
+            return f"{self.name}: -"
+        return f"{self.name}: free " + " ".join(f"[{i}]{cycles(f)}" for i, f in enumerate(free[:8]))
+
+
+#: name -> unit class (registration order); filled by @register_unit as the unit modules are imported
+UNITS: dict[str, type[Unit]] = {}
+#: TOML section -> config dataclass: every unit's, plus the sections no unit owns (runner, sample)
+SECTIONS: dict[str, type] = {}
+
+
+def register_section(name: str, config: type) -> None:
+    """Declare a GPU-config section (a TOML table) built into ``config``."""
+    if name in SECTIONS and SECTIONS[name] is not config:
+        raise ValueError(f"GPU config section {name!r} registered twice")
+    SECTIONS[name] = config
+
+
+def register_unit(cls: type[Unit]) -> type[Unit]:
+    """Class decorator: register a unit under ``cls.name``, with its config section."""
+    if cls.name in UNITS and UNITS[cls.name] is not cls:
+        raise ValueError(f"unit {cls.name!r} registered twice")
+    if cls.Config is None:
+        raise ValueError(f"unit {cls.name!r} declares no Config")
+    UNITS[cls.name] = cls
+    register_section(cls.name, cls.Config)
+    return cls
+
+
+def unregister_unit(name: str) -> None:
+    """Remove a unit and its section (a test's toy unit)."""
+    UNITS.pop(name, None)
+    SECTIONS.pop(name, None)
+
+
+def unit_class(name: str) -> type[Unit]:
+    """The unit registered as ``name``; unknown names fail listing the valid ones."""
+    if name not in UNITS:
+        raise KeyError(f"unknown unit {name!r} (valid: {', '.join(UNITS)})")
+    return UNITS[name]
+
+
+def entry_unit(op: str) -> str:
+    """The unit the SIMT core issues operation ``op`` to."""
+    for name, cls in UNITS.items():
+        if op in cls.issued:
+            return name
+    raise KeyError(f"no registered unit takes operation {op!r} from the core")
