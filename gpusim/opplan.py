@@ -106,6 +106,7 @@ class OpGroup:
     bytes: int | Callable[[np.ndarray, np.ndarray], np.ndarray]   # per op (i, seq) when sizes vary
     dep: bool
     pass_fn: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None   # pass of each op (i, seq)
+    seq_pass: np.ndarray | None = None    # pass of a thread's op ``seq``, the same for every thread (ascending)
 
     @property
     def total(self) -> int:
@@ -138,9 +139,11 @@ class OpGroup:
     def pass_of(self, i: np.ndarray, seq: np.ndarray) -> np.ndarray | int:
         """The pass of each operation ``(i, seq)`` (from :meth:`expand_ops`).
 
-        ``pass_fn(i, seq)`` when the group has one, else the scalar ``pass_index``,
+        ``seq_pass[seq]`` or ``pass_fn(i, seq)`` when the group has one, else the scalar ``pass_index``,
         else the pass of each operation's thread, ``pass_index[i]``.
         """
+        if self.seq_pass is not None:
+            return self.seq_pass[seq]
         if self.pass_fn is not None:
             return self.pass_fn(i, seq)
         if np.isscalar(self.pass_index):
@@ -158,13 +161,16 @@ class OpPlan:
 
     def add(self, pass_index, op: str, structure: str, thread: np.ndarray, count,
             offset: Callable[[np.ndarray, np.ndarray], np.ndarray], nbytes,
-            dep: bool = False, pass_fn=None) -> None:
+            dep: bool = False, pass_fn=None, seq_pass=None) -> None:
         """Append a group in program order (after the groups already added for these threads).
 
         ``nbytes`` is the size of every operation, or ``nbytes(i, seq)`` where
         sizes vary (a compressed fragment).
         ``pass_fn(i, seq)`` gives the pass of each operation when one thread's
         operations of this group span several passes (``pass_index`` is then ignored).
+        ``seq_pass[s]`` says the same when op ``s`` of every thread goes to one pass, a strictly ascending
+        array: consumers then take a pass at a time without expanding the group (depth peeling's passes
+        over every fragment).
         """
         if op not in OPS:
             raise ValueError(f"unknown operation {op!r}")
@@ -180,7 +186,12 @@ class OpPlan:
         if len(thread) and not (0 <= np.min(pass_index) and np.max(pass_index) < len(self.passes)):
             raise ValueError(f"pass index out of range 0..{len(self.passes) - 1}")
         if len(thread) and int(count.sum()) > 0:
-            self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep, pass_fn))
+            if seq_pass is not None:
+                seq_pass = np.asarray(seq_pass, np.int64)
+                if len(seq_pass) < int(count.max()) or (np.diff(seq_pass) <= 0).any():
+                    raise ValueError("seq_pass must give a strictly ascending pass for every op of a thread")
+            self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep, pass_fn,
+                                       seq_pass))
 
     def total_ops(self) -> int:
         return sum(g.total for g in self.groups)
@@ -203,7 +214,10 @@ class OpPlan:
         return out
 
     def _kinds_of(self, g: OpGroup) -> set[str]:
-        index = {int(g.pass_index)} if np.isscalar(g.pass_index) else set(np.unique(g.pass_index).tolist())
+        if g.seq_pass is not None:
+            index = set(g.seq_pass[:int(g.count.max())].tolist())
+        else:
+            index = {int(g.pass_index)} if np.isscalar(g.pass_index) else set(np.unique(g.pass_index).tolist())
         return {self.passes[i].kind for i in index}
 
     def expand(self, bases: dict[str, int], max_ops: int = DEFAULT_MAX_OPS) -> "OpStream":
@@ -211,7 +225,7 @@ class OpPlan:
         total = self.total_ops()
         if total > max_ops:
             raise GpusimError(f"the OpStream would hold {total:,} operations (~{total * 24 / 2**30:.1f} GiB), "
-                              f"over the limit of {max_ops:,}; use a smaller trace or a sampled fidelity")
+                              f"over the limit of {max_ops:,}; use a smaller trace")
         cols: dict[str, list] = {k: [] for k in ("pass_index", "thread", "op", "structure", "address",
                                                   "bytes", "dep")}
         for g in self.groups:

@@ -82,6 +82,26 @@ def _expand_pass(g, n):
     return key[new] // n, key[new] % n, np.diff(np.append(new, len(key)))
 
 
+def _group_passes(g):
+    """Where group ``g``'s operations fall: (lane index into ``g.thread``, ops, {pass: selection}) with the
+    selection of each pass's lanes into the first two (None: all of them; a callable making it when the pass
+    is reached, for a ``seq_pass`` group: memory grows with the threads, not with threads x passes)."""
+    n = len(g.thread)
+    if g.seq_pass is not None:          # op s of every thread in pass seq_pass[s]
+        count = g.count
+        if int(count.min()) == int(count.max()):
+            where = {int(g.seq_pass[s]): None for s in range(int(count.max()))}
+        else:
+            where = {int(g.seq_pass[s]): (lambda s=s: np.flatnonzero(count > s)) for s in range(int(count.max()))}
+        return np.arange(n), np.ones(n, np.int64), where
+    if g.pass_fn is not None:
+        gp, li, cnt = _expand_pass(g, n)
+        return li, cnt, dict(split_by(gp))
+    if np.isscalar(g.pass_index):
+        return np.arange(n), g.count, {int(g.pass_index): None}
+    return np.arange(n), g.count, dict(split_by(np.asarray(g.pass_index, np.int64)))
+
+
 def analytic_timing(result, work, gpu) -> dict:
     plan, bases = result.plan, result.bases()
     c, m = gpu.core, gpu.memory
@@ -97,32 +117,39 @@ def analytic_timing(result, work, gpu) -> dict:
     hottest = np.zeros(n_pass)
     rop_unit = np.zeros((n_pass, gpu.rop.units))
     used: list[set] = [set() for _ in range(n_pass)]
-    last_producer: dict[int, int | None] = {}
-    waited: dict[int, bool] = {}
-    chain: dict[int, tuple] = {}          # pass -> (first lane key, dependent-chain cycles per lane key from it)
-    lane_cache: dict = {}                 # pass -> [(threads, (lanes, first key, keys, threads per lane, present,
-                                          #                     warp max))]
-    for g in plan.groups:
-        n = len(g.thread)
-        thread = g.thread_ids()
-        cls, produces = entry_unit(g.op), g.op in PRODUCES
-        if g.pass_fn is not None:
-            gp, li, cnt = _expand_pass(g, n)
-            split = split_by(gp)
-        elif np.isscalar(g.pass_index):
-            li, cnt = np.arange(n), g.count
-            split = [(int(g.pass_index), None)]
-        else:
-            li, cnt = np.arange(n), g.count
-            split = split_by(np.asarray(g.pass_index, np.int64))
-        nb = g.bytes if not callable(g.bytes) else None
-        for p, sel in split:
+    # where each group's operations fall: per pass, the threads (None: all) issuing them
+    placement = [_group_passes(g) for g in plan.groups]
+    groups_of_pass: list[list[int]] = [[] for _ in range(n_pass)]
+    for gi, (_, _, where) in enumerate(placement):
+        for p in where:
+            groups_of_pass[p].append(gi)
+    passes, total = [], 0
+    for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
+        if pk.kind == "flush":
+            cyc = flush_cycles(c, -(-work.width * work.height // ws))
+            passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": 0, "bound": "flush"})
+            total += cyc
+            continue
+        last_producer, waited = None, False
+        chain = None                          # (first lane key, dependent-chain cycles per lane key from it)
+        lane_cache: list = []                 # [(threads, (lanes, first key, keys, threads per lane, present,
+                                              #             warp max))]
+        for gi in groups_of_pass[p]:          # in program order
+            g = plan.groups[gi]
+            li, cnt, where = placement[gi]
+            sel = where[p]
+            if callable(sel):
+                sel = sel()
+            n = len(g.thread)
+            thread = g.thread_ids()
+            cls, produces = entry_unit(g.op), g.op in PRODUCES
+            nb = g.bytes if not callable(g.bytes) else None
             lanes_sel, counts = (li, cnt) if sel is None else (li[sel], cnt[sel])
             lanes = thread if sel is None else thread[lanes_sel]
             used[p].add(cls)
             # per lane: the group's threads it runs (several fragments of one triangle); groups of one pass on
             # the same threads (a thread's successive operations) share it
-            cached = lane_cache.setdefault(p, []) if sel is None else []
+            cached = lane_cache if sel is None else []
             got = next((v for th, v in cached if len(th) == n and np.array_equal(th, thread)), None)
             if got is None:
                 if thread_mapping(gpu, plan.passes[p]) == "triangle":
@@ -174,34 +201,27 @@ def analytic_timing(result, work, gpu) -> dict:
             # dependent chains per lane: every operation issues; a dependent producer waits for each result,
             # and the first dependent operation after a producer waits once per thread
             add = per_lane * cost
-            lp = last_producer.get(p)
+            lp = last_producer
             if g.dep and produces:
                 add += per_lane * lat[cls]
-            elif g.dep and lp is not None and not waited.get(p, False):
+            elif g.dep and lp is not None and not waited:
                 add += threads_in * lat[lp]
-            base, have = chain.get(p, (lo, np.zeros(0)))
+            base, have = chain if chain is not None else (lo, np.zeros(0))
             if lo < base or lo + size > base + len(have):
                 new_base = min(base, lo)
                 grown = np.zeros(max(base + len(have), lo + size) - new_base)
                 grown[base - new_base:base - new_base + len(have)] = have
                 base, have = new_base, grown
-                chain[p] = (base, have)
+                chain = (base, have)
             have[lo - base:lo - base + size] += add
             if produces:
-                last_producer[p], waited[p] = cls, False
+                last_producer, waited = cls, False
             elif g.dep:
-                waited[p] = True
-    passes, total = [], 0
-    for p, pk in enumerate(plan.passes):
-        if pk.kind == "flush":
-            cyc = flush_cycles(c, -(-work.width * work.height // ws))
-            passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": 0, "bound": "flush"})
-            total += cyc
-            continue
-        if p not in chain:
+                waited = True
+        if chain is None:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": 0, "warps": 0, "bound": "empty"})
             continue
-        lane_chain = chain[p][1]
+        lane_chain = chain[1]
         lane_chain = lane_chain[lane_chain > 0]       # every lane issues, so a present lane has a chain
         wchain = _warp_max(lane_chain, ws)
         n_warps = len(wchain)

@@ -79,17 +79,18 @@ class DepthPeeling(Scheme):
         frags, pixels = n, P
         at = lambda size: (lambda i, s: pix[i] * size)  # noqa: E731
         plan.add(0, "load", "peel_depth", frags, max(total - 1, 0), at(DEPTH_BYTES), DEPTH_BYTES,
-                 pass_fn=lambda i, s: 2 * (s + 1))
+                 seq_pass=2 * np.arange(1, max(total, 1)))
         plan.add(0, "depth_test", "depth_buffer", frags, np.minimum(d + 1, peels), at(DEPTH_BYTES),
-                 DEPTH_BYTES, dep=True, pass_fn=lambda i, s: 2 * s)
+                 DEPTH_BYTES, dep=True, seq_pass=2 * np.arange(peels))
         peeled = np.minimum(lay, peels)
-        plan.add(0, "load", "layer_colour", pixels, peeled, lambda i, s: i * cb, cb, pass_fn=lambda i, s: 2 * s + 1)
+        plan.add(0, "load", "layer_colour", pixels, peeled, lambda i, s: i * cb, cb, seq_pass=2 * np.arange(peels) + 1)
         plan.add(0, "blend", "accumulation", pixels, peeled, lambda i, s: i * cb, cb, dep=True,
-                 pass_fn=lambda i, s: 2 * s + 1)
+                 seq_pass=2 * np.arange(peels) + 1)
 
         order = g.by_depth
         first_of_depth = np.r_[True, (pix[order][1:] != pix[order][:-1]) | (g.key[order][1:] != g.key[order][:-1])]
         keep = first_of_depth & (d[order] < peels)
+        lost = order[~keep]                        # tie losses and layers past the cap
         order = order[keep]
         ties = int(n - np.count_nonzero(first_of_depth))
         struct = [Structure("depth_buffer", DEPTH_BYTES, P, g.covered, "depth of the layer being peeled"),
@@ -98,7 +99,7 @@ class DepthPeeling(Scheme):
                   Structure("accumulation", cb, P, g.covered, "front-to-back accumulated colour")]
         return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n, g.covered,
                             struct, plan, geometry_passes=total, dropped_fragments=int(n - len(order)),
-                            overflowed_pixels=int(np.count_nonzero(lay > peels)),
+                            overflowed_pixels=len(np.unique(pix[lost])),
                             lists=CapturedLists(pix[order], order),
                             stats={"tie_losses": Stat(ties, "fragments", "fragments never peeled: equal depth to a "
                                                       "fragment submitted earlier"),
@@ -131,10 +132,11 @@ class DualDepthPeeling(Scheme):
         # two ping-pong min/max textures: pass k reads texture (k-1) % 2 and writes k % 2
         tex = lambda i, s, k: ((k % 2) * P + pix[i]) * mm  # noqa: E731
         plan.add(0, "blend", "minmax_depth", frags, 1, lambda i, s: tex(i, s, 0), mm)
-        plan.add(0, "load", "minmax_depth", frags, peels, lambda i, s: tex(i, s, s), mm, pass_fn=lambda i, s: s + 1)
+        plan.add(0, "load", "minmax_depth", frags, peels, lambda i, s: tex(i, s, s), mm,
+                 seq_pass=np.arange(1, peels + 1))
         inside = np.minimum(m, peels)
         plan.add(0, "blend", "minmax_depth", frags, inside, lambda i, s: tex(i, s, s + 1), mm, dep=True,
-                 pass_fn=lambda i, s: s + 1)
+                 seq_pass=np.arange(1, peels + 1))
         peeled = m < peels
         front = peeled & (d <= e)
         for name, sel in (("front_colour", front), ("back_colour", peeled & ~front)):

@@ -110,16 +110,16 @@ class RBuffer(Scheme):
         slot = lambda seq: (seq % max(n_f, 1)) * SF  # noqa: E731
         plan.add(1, "store", "r_buffer", stored, 1, lambda i, s: slot(pos[i]), SF, dep=True)
         plan.add(1, "depth_test", "second_z_buffer", stored, 1, lambda i, s: pix[stored[i]] * ZB, ZB, dep=True)
-        read_pass = lambda i, s: 2 + s  # noqa: E731  (pass index of read s + 1; groups start at pass 2)
+        read_pass = 2 + np.arange(n_pass)        # pass index of read s + 1 (recirculation passes start at 2)
         plan.add(2, "load", "r_buffer", stored, removal,
-                 lambda i, s: slot(fifo_sequence(pos[i], s + 1, members)), SF, pass_fn=read_pass)
+                 lambda i, s: slot(fifo_sequence(pos[i], s + 1, members)), SF, seq_pass=read_pass)
         plan.add(2, "depth_test", "second_z_buffer", stored, removal, lambda i, s: pix[stored[i]] * ZB, ZB,
-                 dep=True, pass_fn=read_pass)
+                 dep=True, seq_pass=read_pass)
         vis_pos = np.flatnonzero(~occluded)
         plan.add(2, "blend", "framebuffer", stored[vis_pos], 1, lambda i, s: pix[stored[vis_pos[i]]] * fb_bytes,
                  fb_bytes, dep=True, pass_fn=lambda i, s: 1 + removal[vis_pos[i]])
         plan.add(2, "store", "r_buffer", stored, removal - 1,
-                 lambda i, s: slot(fifo_sequence(pos[i], s + 2, members)), SF, dep=True, pass_fn=read_pass)
+                 lambda i, s: slot(fifo_sequence(pos[i], s + 2, members)), SF, dep=True, seq_pass=read_pass)
 
         # image: back to front, equal depths in FIFO order, rounded after every blend (Eq. 1)
         blend_order = vis_idx[np.lexsort((vis_idx, ~g.key[vis_idx], pix[vis_idx]))]
