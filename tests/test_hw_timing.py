@@ -162,3 +162,19 @@ def test_analytic_level_runs_every_scheme_on_the_stress_scenes(scene):
     _, analytic, _, _ = replay(trace, "linked-list", {}, "analytic")
     _, full, _, _ = replay(trace, "linked-list", {}, "full")
     assert abs(analytic["timing"]["cycles"] / full["timing"]["cycles"] - 1) < 0.1
+
+
+def test_sampled_hazards_never_exceed_the_fragments_that_could_have_one():
+    # 3,000 fragments on one pixel of a 64x64 screen: its tile is always sampled, while the clear pass's entries
+    # are sampled at sample.fraction; the count is scaled by the share of read-modify-write fragments the sample
+    # holds (all of them here), not by its share of all operations, and never passes their number
+    import numpy as np
+
+    from conftest import make_trace
+    n = 3000
+    trace = make_trace(np.zeros(n, int), np.zeros(n, int), np.random.default_rng(3).random(n), width=64, height=64)
+    gpu = load_gpu("gtx280")
+    _, sampled, _, _ = replay(trace, "kbuffer", {"k": 4}, "sampled", gpu)
+    _, full, _, _ = replay(trace, "kbuffer", {"k": 4}, "full", gpu)
+    assert full["timing"]["rmw_hazards"] == n - 1           # every read but the first races
+    assert sampled["timing"]["rmw_hazards"] <= n and sampled["timing"]["rmw_hazard_pixels"] == 1

@@ -10,7 +10,13 @@ setup held the SM's issue port but was not counted in the core's busy cycles
 or instructions. It is now a Compute instruction of the warp's program, so for
 triangle-mapped runs (FreePipe) the core's figures grow by exactly one setup
 per warp: ``raster.setup_instructions x core.issue_cycles`` busy cycles per
-added instruction. Nothing else may differ.
+added instruction.
+
+A second fix changed the fixture itself: the sampled level scaled the hazards it counted by the sample's
+share of all operations, which could report more hazards than there are fragments (or pixels) that read
+and write; it now scales by the share of those fragments (and pixels) and caps at their number. The
+sampled rows' ``rmw_hazards`` and ``rmw_hazard_pixels`` of the k-buffer runs were updated in that commit
+(closer to the full level's in 7 of the 9 rows). Nothing else may differ.
 """
 
 from __future__ import annotations

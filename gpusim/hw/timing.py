@@ -29,6 +29,7 @@ from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine
 from gpusim.hw.program import Program
 from gpusim.hw.thesis import thesis_timing
+from gpusim.opplan import OPS
 
 
 def _base(gpu, fidelity: str, program: Program, n_ops: int) -> dict:
@@ -178,11 +179,26 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     rec["sample"] = info | {"operations_sampled": int(kept),
                             "operations_half_sample": int(sum(p.operations for p in program2.passes))}
     rec["operations"] = int(total)
-    ops_scale = total / max(1, kept)
-    rec["rmw_hazards"] = int(round(rec.get("rmw_hazards", 0) * ops_scale))
-    rec["rmw_hazard_pixels"] = int(round(rec.get("rmw_hazard_pixels", 0) * ops_scale))
+    # hazards scale with the fragments that read-modify-write: the sample's share of them (never more than
+    # there are such fragments)
+    (frags_all, pixels_all), (frags_kept, pixels_kept) = _rmw_threads(work.plan, work), _rmw_threads(program, work)
+    for key, every, kept in (("rmw_hazards", frags_all, frags_kept), ("rmw_hazard_pixels", pixels_all, pixels_kept)):
+        rec[key] = min(every, int(round(rec.get(key, 0) * every / kept))) if kept else 0
     rec["event_seconds"] = time.perf_counter() - start
     return _finish(rec, gpu, sum(p["cycles"] for p in rec["passes"])), None
+
+
+def _rmw_threads(source, work: Workload) -> tuple[int, int]:
+    """Fragment threads with an ``rmw_read``, and their pixels: of an OpPlan, or of a lowered (sampled)
+    Program."""
+    if isinstance(source, Program):
+        rows = source.rows_of("coalescer")
+        threads = rows.thread[rows.op == OPS.index("rmw_read")] if len(rows) else np.zeros(0, np.int64)
+    else:
+        parts = [g.thread_ids() for g in source.groups if g.op == "rmw_read"]
+        threads = np.concatenate(parts) if parts else np.zeros(0, np.int64)
+    threads = np.unique(threads)
+    return len(threads), len(np.unique(work.frag_pixel[threads])) if len(threads) else 0
 
 
 def run_analytic(work, gpu, result=None, reference=None) -> tuple[dict, None]:
