@@ -14,6 +14,7 @@ by the table's ``kind`` key; unknown kinds fail with the list of valid ones.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import tomllib
@@ -41,7 +42,7 @@ class _Ctx:
         self.where = where
 
     def fail(self, key: str, problem: str) -> typing.NoReturn:
-        raise ConfigError(f"{self.where}: {key}: {problem}")
+        raise ConfigError(f"{self.where}: {key}: {problem}", key=key, problem=problem)
 
 
 def _convert(value: Any, hint: Any, key: str, ctx: _Ctx) -> Any:
@@ -90,7 +91,7 @@ def _convert(value: Any, hint: Any, key: str, ctx: _Ctx) -> Any:
 def _check_bounds(value: Any, meta: typing.Mapping, key: str, ctx: _Ctx) -> None:
     if not isinstance(value, (int, float)) or isinstance(value, bool):
         return
-    unit = f" {meta['unit']}" if meta.get("unit") else ""
+    unit = f" {meta['unit']}" if meta.get("unit") not in (None, "", "1") else ""   # "1": dimensionless
     if meta.get("gt") is not None and not value > meta["gt"]:
         ctx.fail(key, f"must be > {meta['gt']}{unit}, got {value}")
     if meta.get("min") is not None and value < meta["min"]:
@@ -132,18 +133,25 @@ def build(cls: type, data: Any, where: str, prefix: str = "") -> Any:
         return cls(**kwargs)
     except ConfigError:
         raise
-    except ValueError as exc:  # cross-field checks in __post_init__
+    except ValueError as exc:  # checks in __post_init__; a message "field: problem" names that field
+        name, sep, problem = str(exc).partition(": ")
+        if sep and name in fields:
+            ctx.fail(f"{dot}{name}", problem)
         ctx.fail(prefix or cls.__name__, str(exc))
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """Parse ``a.b.c=value``; the value is read as a TOML value, else kept as a string."""
+def parse_override(text: str, option: str = "--set", example: str = "camera.fov_y_deg=60",
+                   form: str = "KEY=VALUE") -> tuple[list[str], Any]:
+    """Parse ``a.b.c=value``; the value is read as a TOML value, else kept as a string.
+
+    Errors name the command-line ``option`` the text came from and show ``example``.
+    """
     if "=" not in text:
-        raise ConfigError(f"--set {text}: expected KEY=VALUE, e.g. --set camera.fov_y_deg=60")
+        raise ConfigError(f"{option} {text}: expected {form}, e.g. {option} {example}")
     key, raw = text.split("=", 1)
     parts = [p for p in key.strip().split(".")]
     if not key.strip() or any(not p for p in parts):
-        raise ConfigError(f"--set {text}: the key is empty or has an empty part")
+        raise ConfigError(f"{option} {text}: the key is empty or has an empty part")
     try:
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
     except tomllib.TOMLDecodeError:
@@ -151,21 +159,25 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return parts, value
 
 
-def apply_overrides(data: dict, overrides: typing.Iterable[str]) -> dict:
-    """Apply ``--set`` overrides to a parsed TOML tree in place; numeric parts index lists."""
+def apply_overrides(data: dict, overrides: typing.Iterable[str], option: str = "--set",
+                    example: str = "camera.fov_y_deg=60") -> dict:
+    """Apply ``--set`` overrides to a parsed TOML tree in place; numeric parts index lists.
+
+    Errors name ``option`` (the command-line option the overrides came from).
+    """
     for text in overrides:
-        parts, value = parse_override(text)
+        parts, value = parse_override(text, option, example)
         node: Any = data
         for i, part in enumerate(parts):
             last = i == len(parts) - 1
             where = ".".join(parts[: i + 1])
             if isinstance(node, list):
                 if not part.isdigit() or int(part) >= len(node):
-                    raise ConfigError(f"--set {text}: '{where}' is not an index into a list of "
+                    raise ConfigError(f"{option} {text}: '{where}' is not an index into a list of "
                                       f"{len(node)} entries (valid: 0..{len(node) - 1})")
                 part = int(part)
             elif not isinstance(node, dict):
-                raise ConfigError(f"--set {text}: '{'.'.join(parts[:i])}' is a value, not a table")
+                raise ConfigError(f"{option} {text}: '{'.'.join(parts[:i])}' is a value, not a table")
             if last:
                 node[part] = value
             else:
@@ -173,6 +185,34 @@ def apply_overrides(data: dict, overrides: typing.Iterable[str]) -> dict:
                     node[part] = {}
                 node = node[part]
     return data
+
+
+def build_overridden(builder: typing.Callable[[dict, str], Any], table: dict, where: str,
+                     overrides: typing.Sequence[str], option: str = "--set",
+                     example: str = "camera.fov_y_deg=60", labels: typing.Sequence[str] | None = None) -> Any:
+    """``builder(table, where)`` with command-line ``overrides`` applied (a copy; ``table`` is kept).
+
+    A problem of the table itself names the file ``where``; one that only the
+    overrides bring names the override that set the key at fault (``option
+    KEY=VALUE``, or ``labels[i]`` for ``overrides[i]`` when given), or all of
+    them when the problem has no single key.
+    """
+    data = apply_overrides(copy.deepcopy(table), overrides, option, example)
+    try:
+        return builder(data, where)
+    except ConfigError as exc:
+        if not overrides:
+            raise
+        builder(copy.deepcopy(table), where)       # the file's own problem: it names the file
+        key = exc.key or ""
+        labels = labels or [f"{option} {text}" for text in overrides]
+        related = [label for text, label in zip(overrides, labels)
+                   if (k := ".".join(parse_override(text)[0])) == key or key.startswith(k + ".")
+                   or (key and k.startswith(key + "."))]
+        blamed = related[-1:] or list(dict.fromkeys(labels))   # the last setting of a key is the one that counts
+        problem = exc.problem.removeprefix(f"{where}: ")
+        raise ConfigError(f"{' '.join(blamed)}: {key + ': ' if key else ''}{problem}",
+                          key=exc.key, problem=exc.problem) from None
 
 
 def load_toml(path: str | Path) -> dict:

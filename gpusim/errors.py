@@ -11,7 +11,17 @@ class GpusimError(Exception):
 
 
 class ConfigError(GpusimError):
-    """A configuration file or override names an unknown key or an invalid value."""
+    """A configuration file or override names an unknown key or an invalid value.
+
+    ``key`` is the dotted key at fault when there is one, and ``problem`` the
+    message without the file and key (so a caller can blame the override that
+    set the key instead of the file).
+    """
+
+    def __init__(self, message: str, key: str | None = None, problem: str | None = None):
+        super().__init__(message)
+        self.key = key
+        self.problem = problem or message
 
 
 class TraceError(GpusimError):

@@ -40,7 +40,7 @@ def parse_params(items: list[str] | None) -> dict[str, Any]:
     """``["layers=8", "packing=true"]`` -> {"layers": 8, "packing": True} (values read as TOML)."""
     params: dict[str, Any] = {}
     for text in items or []:
-        parts, value = parse_override(text)
+        parts, value = parse_override(text, "--param", f"{text.strip() or 'layers'}=8", "NAME=VALUE")
         if len(parts) != 1:
             raise ConfigError(f"--param {text}: scheme parameters have no dots (e.g. --param layers=8)")
         params[parts[0]] = value

@@ -60,12 +60,19 @@ def _numeric(chunk: pd.DataFrame, column: str, path: Path, first_row: int) -> np
     return values
 
 
-def _integers(values: np.ndarray, column: str, limit: int, path: Path, first_row: int) -> np.ndarray:
-    bad = np.flatnonzero((values != np.floor(values)) | (values < 0) | (values >= limit))
+def _integers(values: np.ndarray, column: str, limit: int, path: Path, first_row: int,
+              side: str | None = None) -> np.ndarray:
+    """``values`` checked to be integers in 0..limit-1; ``side`` ("width", "height") marks a pixel coordinate."""
+    fraction = values != np.floor(values)
+    bad = np.flatnonzero(fraction | (values < 0) | (values >= limit))
     if bad.size:
-        line = first_row + int(bad[0]) + 2
-        raise TraceError(f"{path}:{line}: {column}={values[bad[0]]:g} is not an integer in "
-                         f"0..{limit - 1}; fix the row or give a larger --size")
+        i = int(bad[0])
+        value = values[i]
+        where = f"{path}:{first_row + i + 2}: {column}={value:g}"
+        if fraction[i] or side is None:
+            raise TraceError(f"{where} is not an integer in 0..{limit - 1}; fix the row")
+        raise TraceError(f"{where} puts the pixel outside the screen: coordinates must be 0 <= {column} < {limit} "
+                         f"(the screen {side}); fix the row" + (" or give a larger --size" if value >= limit else ""))
     return values
 
 
@@ -94,8 +101,8 @@ def _fill(path: Path, columns: list[str], n: int, width: int, height: int, out: 
             if pos + rows > n:
                 raise TraceError(f"{path}: the file changed while it was read; try again")
             sl = slice(pos, pos + rows)
-            out["x"][sl] = _integers(_numeric(chunk, "x", path, pos), "x", width, path, pos)
-            out["y"][sl] = _integers(_numeric(chunk, "y", path, pos), "y", height, path, pos)
+            out["x"][sl] = _integers(_numeric(chunk, "x", path, pos), "x", width, path, pos, "width")
+            out["y"][sl] = _integers(_numeric(chunk, "y", path, pos), "y", height, path, pos, "height")
             out["z"][sl] = _numeric(chunk, "z", path, pos)
             for i, c in enumerate("rgba"):
                 out["rgba"][sl, i] = _numeric(chunk, c, path, pos)

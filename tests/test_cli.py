@@ -53,6 +53,13 @@ def test_csv_import_through_cli(tmp_path, capsys):
     (["trace", "default", "--size", "12", "-o", "{tmp}/o.npz"], "expected WIDTHxHEIGHT"),
     (["trace", "default", "--size", "0x5", "-o", "{tmp}/o.npz"], "each side must lie in"),
     (["trace", "default", "--set", "camera.zoom=3", "-o", "{tmp}/o.npz"], "camera.zoom: unknown key"),
+    (["trace", "default", "--set", "camera.fovy=60", "-o", "{tmp}/o.npz"],
+     "error: --set camera.fovy=60: camera.fovy: unknown key (valid: eye, target"),
+    (["trace", "thesis-frame60", "--size", "8x8", "-o", "{tmp}/o.npz"], "error: --size 8x8: "),
+    (["trace", "default", "-o", "{tmp}/bad.csv/o.npz"], "bad.csv is a file, so nothing can be written under it"),
+    (["trace", "default", "-o", "/proc/o.npz"], "cannot write in /proc"),
+    (["trace", "--from-csv", "{tmp}/neg.csv", "--size", "4x4", "-o", "{tmp}/o.npz"],
+     "neg.csv:2: x=-1 puts the pixel outside the screen: coordinates must be 0 <= x < 4 (the screen width)"),
     (["trace", "default", "--alpha", "0.5", "-o", "{tmp}/o.npz"], "--alpha applies to mesh files only"),
     (["trace", "--from-csv", "{tmp}/bad.csv", "-o", "{tmp}/o.npz"], "needs the screen size"),
     (["trace", "--from-csv", "{tmp}/bad.csv", "--size", "4x4", "-o", "{tmp}/o.npz"], "bad.csv:2: column 'z' is empty or NaN"),
@@ -61,6 +68,7 @@ def test_csv_import_through_cli(tmp_path, capsys):
 ])
 def test_bad_input_is_one_line_nonzero_and_leaves_no_output(tmp_path, capsys, argv, expect):
     (tmp_path / "bad.csv").write_text("x,y,z,r,g,b,a\n0,0,,1,1,1,1\n")
+    (tmp_path / "neg.csv").write_text("x,y,z,r,g,b,a\n-1,0,0.5,1,1,1,1\n")
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     code, out, err = run(capsys, *argv)
     assert code == 2 and expect in err

@@ -161,6 +161,31 @@ def test_impossible_gpu_config_fails_at_load(key, value, match):
         load_gpu("gtx280", [f"{key}={value}"])
 
 
+@pytest.mark.parametrize("override, message", [
+    ("core.warp_size=33", "--gpu-set core.warp_size=33: core.warp_size: must be a power of two from 1 to 1024"),
+    ("core.smss=4", "--gpu-set core.smss=4: core.smss: unknown key (valid: sms, warp_size, lanes_per_sm"),
+    ("sample.fraction=0", "--gpu-set sample.fraction=0: sample.fraction: must be > 0, got 0.0"),
+    ("scoreboard.entries=8", "--gpu-set scoreboard.entries=8: scoreboard.entries (8) must be >= core.warp_size"),
+])
+def test_a_bad_override_names_the_override_not_the_preset(override, message):
+    with pytest.raises(ConfigError) as exc:
+        load_gpu("gtx280", [override])
+    assert str(exc.value).startswith(message) and "gtx280.toml" not in str(exc.value)
+
+
+def test_warp_sizes_are_powers_of_two():
+    assert load_gpu("gtx280", ["core.warp_size=64", "scoreboard.entries=64"]).core.warp_size == 64
+    assert load_gpu("gtx280", ["core.warp_size=1"]).core.issue_cycles == 1
+
+
+@pytest.mark.parametrize("text", ["", "# nothing but a comment\n"])
+def test_an_empty_gpu_file_is_an_error_naming_it(tmp_path, text):
+    path = tmp_path / "empty.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match="empty.toml: the GPU file is empty"):
+        load_gpu(str(path))
+
+
 def test_presets_load_and_unknown_preset_lists_valid():
     for name in ("gtx280", "geforce7900gtx", "modern"):
         g = load_gpu(name)

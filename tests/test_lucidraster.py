@@ -75,7 +75,8 @@ def test_alpha_threshold_stops_a_saturated_half_block():
     assert off.stats["skipped_samples"].value == 0
     # alpha 0.5: transmittance <= 1/128 after 7 blends; with DF = 3 the 7th leaves the filter when the
     # 10th layer arrives (half-block positions 288..319), so shading stops after the 2nd 256-sample segment
-    assert on.stats["skipped_samples"].value == 32 * layers - 512
+    assert on.stats["skipped_samples"].value == on.dropped_fragments == 32 * layers - 512
+    assert on.overflowed_pixels == 32                 # every pixel of the half-block lost the skipped samples
     assert image_error(on.image, ref)["max_abs"] <= 1 / 128 + 1e-6
     # a pixel of the half-block that never saturates (no samples) keeps the whole half-block shading
     holed = t.subset(~((t.x == 7) & (t.y == 3)))

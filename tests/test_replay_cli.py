@@ -44,8 +44,14 @@ def test_replay_writes_image_difference_and_stats(trace_file, tmp_path, capsys):
     (["--scheme", "abuffer"], "unknown scheme (valid: alpha-blend"),
     (["--scheme", "kbuffer", "--param", "kk=3"], "kk: unknown key (valid: k, mode"),
     (["--scheme", "kbuffer", "--param", "k=0"], "k: must be >= 1"),
-    (["--scheme", "kbuffer", "--param", "k"], "expected KEY=VALUE"),
+    (["--scheme", "kbuffer", "--param", "k"], "--param k: expected NAME=VALUE, e.g. --param k=8"),
     (["--scheme", "kbuffer", "--param", "a.b=1"], "have no dots"),
+    (["--scheme", "kbuffer", "--gpu-set", "core.sms=4"], "--gpu-set/--gpu need --fidelity LEVEL"),
+    (["--scheme", "kbuffer", "--gpu", "modern"], "--gpu-set/--gpu need --fidelity LEVEL"),
+    (["--scheme", "kbuffer", "--fidelity", "full", "--gpu-set", "core.smss=4"],
+     "error: --gpu-set core.smss=4: core.smss: unknown key (valid: sms, warp_size"),
+    (["--scheme", "kbuffer", "--fidelity", "analytic", "--gpu-set", "core.warp_size=33"],
+     "--gpu-set core.warp_size=33: core.warp_size: must be a power of two"),
 ])
 def test_replay_bad_input_is_one_line_and_leaves_no_output(trace_file, tmp_path, capsys, args, message):
     out = tmp_path / "never"
@@ -107,3 +113,40 @@ def test_replay_thesis_fidelity_reports_cycles(trace_file, capsys):
     assert main(["replay", str(trace_file), "--scheme", "kbuffer", "--fidelity", "thesis"]) == 2
     err = capsys.readouterr().err
     assert "models only r-buffer, tfss, weight-factor" in err and len(err.strip().splitlines()) == 1
+
+
+def test_text_output_formats_table_stats(trace_file, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["replay", str(trace_file), "--scheme", "lucidraster", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "stat         bins = empty=" in text and "promoted=" in text
+    assert json.loads((out / "stats.json").read_text())["stats"]["bins"]["value"]["empty"] >= 0
+
+
+def test_outputs_appear_together_or_not_at_all(trace_file, tmp_path, capsys, monkeypatch):
+    import gpusim.report.images as images
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(images, "save_heatmap_png", full_disk)       # difference.png, after image.png
+    out = tmp_path / "out"
+    assert main(["replay", str(trace_file), "--scheme", "wboit", "-o", str(out)]) == 2
+    assert capsys.readouterr().out == "" and not out.exists() and list(tmp_path.iterdir()) == [trace_file]
+
+
+@pytest.mark.parametrize("output, message", [
+    ("{tmp}/file/out", "file is a file, so nothing can be written under it"),
+    ("{tmp}/file", "that is a file, not a folder"),
+    ("/proc/gpusim-out", "cannot write in /proc"),
+])
+def test_unwritable_output_fails_before_the_run(trace_file, tmp_path, capsys, monkeypatch, output, message):
+    import gpusim.cli.replay_cmd as replay_cmd
+
+    (tmp_path / "file").write_text("keep")
+    monkeypatch.setattr(replay_cmd, "replay", lambda *a: pytest.fail("ran before checking -o"))
+    output = output.replace("{tmp}", str(tmp_path))
+    assert main(["replay", str(trace_file), "--scheme", "wboit", "-o", output]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"gpusim: error: -o {output}: ") and message in err and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "t.npz"]
+    assert (tmp_path / "file").read_text() == "keep"

@@ -216,6 +216,7 @@ def test_depth_peeling_loses_equal_depths_dual_peeling_keeps_them():
     t = make_trace([0, 0, 0], [0, 0, 0], [0.5, 0.5, 0.2], rgba=rgba, width=1, height=1)
     dp = run("depth-peeling", t, colour_format="rgba32f")
     assert dp.geometry_passes == 2 and dp.stats["tie_losses"].value == 1 and dp.dropped_fragments == 1
+    assert dp.overflowed_pixels == 1                  # the pixel that lost the tie lost a fragment
     ddp = run("dual-depth-peeling", t, colour_format="rgba32f")
     assert ddp.dropped_fragments == 0
 

@@ -52,9 +52,13 @@ def test_chunked_reading_matches(tmp_path, monkeypatch):
     ("x,y,z,r,g,b,a,depth\n0,0,0.5,1,1,1,1,3\n", "unknown column(s) depth"),
     ("x,y,z,r,g,b,a\n0,0,nan,1,1,1,1\n", "f.csv:2: column 'z' is empty or NaN"),
     ("x,y,z,r,g,b,a\n0,0,0.5,1,1,1,1\n0,0,abc,1,1,1,1\n", "f.csv:3: column 'z' holds 'abc'"),
-    ("x,y,z,r,g,b,a\n9,0,0.5,1,1,1,1\n", "x=9 is not an integer in 0..3"),
+    ("x,y,z,r,g,b,a\n9,0,0.5,1,1,1,1\n", "x=9 puts the pixel outside the screen: coordinates must be 0 <= x < 4 "
+                                         "(the screen width); fix the row or give a larger --size"),
+    ("x,y,z,r,g,b,a\n0,4,0.5,1,1,1,1\n", "y=4 puts the pixel outside the screen: coordinates must be 0 <= y < 4 "
+                                         "(the screen height)"),
     ("x,y,z,r,g,b,a\n1.5,0,0.5,1,1,1,1\n", "x=1.5 is not an integer"),
-    ("x,y,z,r,g,b,a\n-1,0,0.5,1,1,1,1\n", "x=-1 is not an integer"),
+    ("x,y,z,r,g,b,a\n-1,0,0.5,1,1,1,1\n", "x=-1 puts the pixel outside the screen: coordinates must be "
+                                          "0 <= x < 4 (the screen width); fix the row"),
     ("x,y,z,r,g,b,a\n0,0,1.5,1,1,1,1\n", "f.csv:2: fragment 0 has depth 1.5 outside [0, 1]"),
     ("x,y,z,r,g,b,a\n0,0,0.5,1,1,1,2\n", "colour/alpha"),
     ("x,y,z,r,g,b,a,opaque\n0,0,0.5,1,1,1,1,maybe\n", "opaque='maybe'"),

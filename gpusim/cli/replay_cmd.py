@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gpusim.atomic_io import write_text_atomic
-from gpusim.cli.common import print_json
+from gpusim.atomic_io import atomic_folder, write_text_atomic
+from gpusim.cli.common import check_output, print_json
+from gpusim.errors import GpusimError
 from gpusim.hw import DEFAULT_GPU, FIDELITIES, gpu_presets, load_gpu
 from gpusim.replay import jsonable, parse_params, replay
 from gpusim.schemes import scheme_names
@@ -43,75 +44,102 @@ def _mib(n: int) -> str:
     return f"{n / 2**20:,.2f} MiB" if n >= 2**20 else f"{n / 1024:,.1f} KiB" if n >= 1024 else f"{n} B"
 
 
+def _value(value) -> str:
+    """A stat value as text: numbers with thousands separators, tables as NAME=VALUE pairs, lists in [ ]."""
+    if isinstance(value, dict):
+        return ", ".join(f"{k}={_value(v)}" for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_value(v) for v in value) + "]"
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return f"{value:,}"
+    return str(value)
+
+
 def run(args) -> int:
+    if (args.gpu or args.gpu_set) and not args.fidelity:
+        raise GpusimError("--gpu-set/--gpu need --fidelity LEVEL: only a timing model uses the GPU; "
+                          "add e.g. --fidelity analytic, or drop --gpu/--gpu-set")
+    out = check_output(args.output, folder=True) if args.output else None
     trace = load_trace(args.trace)
     params = parse_params(args.param)
-    gpu = load_gpu(args.gpu, args.gpu_set) if (args.fidelity or args.gpu or args.gpu_set) else None
+    gpu = load_gpu(args.gpu, args.gpu_set) if args.fidelity else None
     result, record, image, reference = replay(trace, args.scheme, params, args.fidelity, gpu)
-    if args.output:
-        _write_outputs(Path(args.output), record, image, reference, result.extras.get("timed_image"))
+    text = None if args.json else _text(args, record)    # formatted before anything is written
+    if out is not None:
+        _write_outputs(out, record, image, reference, result.extras.get("timed_image"))
     if args.json:
         print_json(record)
-        return 0
-    e = record["error"]
-    print(f"scheme       {record['scheme']}  " + " ".join(f"{k}={v}" for k, v in record["params"].items()))
-    print(f"trace        {args.trace}: {record['fragments']:,} fragments on {record['pixels']:,} pixels")
-    print(f"passes       {record['geometry_passes']} geometry; "
-          + ", ".join(p["name"] for p in record["passes"][:8]) + (" ..." if len(record["passes"]) > 8 else ""))
-    print("footprint    structure          allocated       used")
-    for name, size in record["footprint_bytes"].items():
-        print(f"             {name:<16} {_mib(size):>12} {_mib(record['footprint_used_bytes'][name]):>12}")
-    print("accesses     structure          operation      count")
-    for name, ops in record["accesses"].items():
-        for op, count in ops.items():
-            print(f"             {name:<16} {op:<12} {count:>12,}")
-    print(f"dropped      {record['dropped_fragments']:,} fragments ({record['overflowed_pixels']:,} pixels lost some)")
-    for name, stat in record["stats"].items():
-        print(f"stat         {name} = {stat['value']:,} {stat['unit']}  ({stat['doc']})")
-    psnr = "inf" if e["psnr"] == float("inf") else f"{e['psnr']:.2f}"
-    print(f"error        rmse {e['rmse']:.3g}, psnr {psnr} dB, {e['differing_pixels']:,} pixels differ "
-          f"by more than one 8-bit step")
-    if "timing" in record:
-        _print_timing(record["timing"])
-    print(f"wall         {record['wall_seconds']:.3f} s (functional model)")
-    if args.output:
-        print(f"wrote        {args.output}/image.png, difference.png, stats.json")
+    else:
+        print(text)
     return 0
 
 
-def _print_timing(t: dict) -> None:
+def _text(args, record: dict) -> str:
+    """The text report of a replay record."""
+    lines: list[str] = []
+    add = lines.append
+    e = record["error"]
+    add(f"scheme       {record['scheme']}  " + " ".join(f"{k}={v}" for k, v in record["params"].items()))
+    add(f"trace        {args.trace}: {record['fragments']:,} fragments on {record['pixels']:,} pixels")
+    add(f"passes       {record['geometry_passes']} geometry; "
+        + ", ".join(p["name"] for p in record["passes"][:8]) + (" ..." if len(record["passes"]) > 8 else ""))
+    add("footprint    structure          allocated       used")
+    for name, size in record["footprint_bytes"].items():
+        add(f"             {name:<16} {_mib(size):>12} {_mib(record['footprint_used_bytes'][name]):>12}")
+    add("accesses     structure          operation      count")
+    for name, ops in record["accesses"].items():
+        for op, count in ops.items():
+            add(f"             {name:<16} {op:<12} {count:>12,}")
+    add(f"dropped      {record['dropped_fragments']:,} fragments ({record['overflowed_pixels']:,} pixels lost some)")
+    for name, stat in record["stats"].items():
+        add(f"stat         {name} = {_value(stat['value'])} {stat['unit']}  ({stat['doc']})")
+    psnr = "inf" if e["psnr"] == float("inf") else f"{e['psnr']:.2f}"
+    add(f"error        rmse {e['rmse']:.3g}, psnr {psnr} dB, {e['differing_pixels']:,} pixels differ "
+        f"by more than one 8-bit step")
+    if "timing" in record:
+        _timing_text(record["timing"], add)
+    add(f"wall         {record['wall_seconds']:.3f} s (functional model)")
+    if args.output:
+        add(f"wrote        {args.output}/image.png, difference.png, stats.json")
+    return "\n".join(lines)
+
+
+def _timing_text(t: dict, add) -> None:
+    """The timing lines of a replay record, each passed to ``add``."""
     if t["fidelity"] == "thesis":
-        print(f"cycles       {t['cycles']:,} ({t['fidelity']}: {t['memory_cycles']:,} memory + "
-              f"{t['compute_cycles']:,} compute, {t['compute_formula']} per pixel)")
+        add(f"cycles       {t['cycles']:,} ({t['fidelity']}: {t['memory_cycles']:,} memory + "
+            f"{t['compute_cycles']:,} compute, {t['compute_formula']} per pixel)")
         return
-    print(f"cycles       {t['cycles']:,} ({t['fidelity']} on {t['gpu']}: {t['microseconds']:,.1f} us; "
-          f"{t['instructions']:,} warp instructions, {t['wall_seconds']:.2f} s)")
+    add(f"cycles       {t['cycles']:,} ({t['fidelity']} on {t['gpu']}: {t['microseconds']:,.1f} us; "
+        f"{t['instructions']:,} warp instructions, {t['wall_seconds']:.2f} s)")
     for p in t["passes"][:12]:
         extra = f"  bound: {p['bound']}" if "bound" in p else ""
-        print(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")
+        add(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")
     if len(t["passes"]) > 12:
-        print(f"  pass       ... {len(t['passes']) - 12} more")
+        add(f"  pass       ... {len(t['passes']) - 12} more")
     for name, u in t["units"].items():
         if "utilisation_mean" in u:
-            print(f"  unit       {name:<10} utilisation mean {u['utilisation_mean']:.1%}"
-                  + (f", max {u['utilisation_max']:.1%}" if "utilisation_max" in u else ""))
+            add(f"  unit       {name:<10} utilisation mean {u['utilisation_mean']:.1%}"
+                + (f", max {u['utilisation_max']:.1%}" if "utilisation_max" in u else ""))
         else:
-            print(f"  unit       {name:<10} {u.get('requests', 0):,} requests")
+            add(f"  unit       {name:<10} {u.get('requests', 0):,} requests")
     if t.get("rmw_hazards") is not None:
         line = f"{t['rmw_hazards']:,} fragments read an obsolete value ({t['rmw_hazard_pixels']:,} pixels)"
         if "rmw_image_error" in t:
             e = t["rmw_image_error"]
             line += f"; image in event order: rmse {e['rmse']:.3g}, {e['differing_pixels']:,} pixels differ"
-        print(f"rmw hazards  {line}")
+        add(f"rmw hazards  {line}")
 
 
 def _write_outputs(out: Path, record: dict, image, reference, timed=None) -> None:
+    """The output files, moved into ``out`` together once all are written."""
     from gpusim.report.images import save_heatmap_png, save_image_png
 
     diff = np.abs(np.asarray(image) - reference).max(axis=2)
-    save_image_png(image, out / "image.png")
-    if timed is not None:
-        save_image_png(timed, out / "image-timed.png")
-    save_heatmap_png(diff, out / "difference.png", title=f"{record['scheme']}: |image - reference| (max channel)",
-                     label="absolute difference")
-    write_text_atomic(out / "stats.json", json.dumps(jsonable(record), indent=2) + "\n")
+    with atomic_folder(out) as tmp:
+        save_image_png(image, tmp / "image.png")
+        if timed is not None:
+            save_image_png(timed, tmp / "image-timed.png")
+        save_heatmap_png(diff, tmp / "difference.png",
+                         title=f"{record['scheme']}: |image - reference| (max channel)", label="absolute difference")
+        write_text_atomic(tmp / "stats.json", json.dumps(jsonable(record), indent=2) + "\n")

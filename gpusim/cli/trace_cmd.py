@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from gpusim.cli.common import parse_size
+from gpusim.cli.common import check_output, parse_size
 from gpusim.errors import GpusimError
 from gpusim.scene import load_scene, trace_scene
 from gpusim.trace_csv import read_csv_trace
@@ -31,6 +31,7 @@ def run(args) -> int:
     out = Path(args.output)
     if out.suffix != ".npz":
         raise GpusimError(f"-o {out}: a trace file must end in .npz; e.g. -o traces/scene.npz")
+    check_output(args.output)
     progress = False if args.no_progress else None
     start = time.perf_counter()
     if args.from_csv:
@@ -43,11 +44,8 @@ def run(args) -> int:
     else:
         if not args.scene:
             raise GpusimError("name a SCENE (scene file, built-in name or mesh file) or use --from-csv")
-        overrides = list(args.set)
-        if args.size:
-            width, height = parse_size(args.size)
-            overrides += [f"screen.width={width}", f"screen.height={height}"]
-        scene, base = load_scene(args.scene, overrides, alpha=args.alpha)
+        size = parse_size(args.size) if args.size else None
+        scene, base = load_scene(args.scene, args.set, alpha=args.alpha, size=size)
         trace = trace_scene(scene, base, where=args.scene, progress=progress)
     save_trace(trace, out)
     dc = trace.depth_complexity()

@@ -50,6 +50,11 @@ class CoreConfig:
     pipeline_latency: int = param(200, unit="cycles", doc="cycles to drain the pipeline at a flush "
                                   "(a pass boundary that waits for all work)", min=0)
 
+    def __post_init__(self) -> None:
+        if self.warp_size & (self.warp_size - 1) or not 1 <= self.warp_size <= 1024:
+            raise ValueError(f"warp_size: must be a power of two from 1 to 1024 threads (e.g. 32), "
+                             f"got {self.warp_size}")
+
     @property
     def issue_cycles(self) -> int:
         """Cycles one warp instruction occupies the SM's issue port."""

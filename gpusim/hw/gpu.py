@@ -21,7 +21,7 @@ from pathlib import Path
 
 # importing the unit modules registers them and their config sections, in this order
 from gpusim.hw import core, raster, memory, atomic, rop, blender, scoreboard  # noqa: F401
-from gpusim.config import apply_overrides, build, load_toml, param, to_dict
+from gpusim.config import build, build_overridden, load_toml, param, to_dict
 from gpusim.errors import ConfigError
 from gpusim.hw.memory import MemoryLevel
 from gpusim.hw.unit import SECTIONS, UNITS, register_section
@@ -115,15 +115,17 @@ class GpuConfig:
         fields = ("name", "source", *SECTIONS)
         unknown = [k for k in data if k not in fields]
         if unknown:
-            raise ConfigError(f"{where}: {unknown[0]}: unknown key (valid: {', '.join(fields)})")
+            problem = f"unknown key (valid: {', '.join(fields)})"
+            raise ConfigError(f"{where}: {unknown[0]}: {problem}", key=unknown[0], problem=problem)
         for key in ("name", "source"):
             if key in data and not isinstance(data[key], str):
-                raise ConfigError(f"{where}: {key}: expected a string, got {data[key]!r}")
+                problem = f"expected a string, got {data[key]!r}"
+                raise ConfigError(f"{where}: {key}: {problem}", key=key, problem=problem)
         sections = {k: build(SECTIONS[k], data[k], where, k) for k in SECTIONS if k in data}
         try:
             return cls(data.get("name", "custom"), data.get("source", ""), **sections)
         except ValueError as exc:
-            raise ConfigError(f"{where}: {exc}") from None
+            raise ConfigError(f"{where}: {exc}", problem=str(exc)) from None
 
     def _check(self) -> None:
         """Checks across sections (each section checks its own fields)."""
@@ -173,5 +175,9 @@ def load_gpu(spec: str | None = None, overrides: list[str] | None = None) -> Gpu
             raise ConfigError(f"--gpu {spec}: unknown GPU preset (valid: {', '.join(gpu_presets())}, "
                               f"or a .toml file)")
         path = preset_file(spec)
-    data = apply_overrides(load_toml(path), overrides or [])
-    return GpuConfig.from_table(data, str(path))
+    data = load_toml(path)
+    if not data:
+        raise ConfigError(f"{path}: the GPU file is empty; give at least one section such as [core] "
+                          f"(start from a preset: {preset_file(DEFAULT_GPU)})")
+    return build_overridden(GpuConfig.from_table, data, str(path), overrides or [], "--gpu-set",
+                            "rop.reorder_entries=16")

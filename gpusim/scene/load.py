@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Iterable
 
 from gpusim import __version__
-from gpusim.config import apply_overrides, build, load_toml, to_dict
+from gpusim.config import build, build_overridden, load_toml, to_dict
 from gpusim.errors import ConfigError
 from gpusim.raster import rasterize
 from gpusim.scene.build import scene_triangles
@@ -60,9 +60,10 @@ def mesh_scene_table(mesh: Path, alpha: float) -> dict:
                          "color": [0.85, 0.75, 0.6]}]}
 
 
-def load_scene(arg: str, overrides: Iterable[str] = (), alpha: float | None = None
-               ) -> tuple[Scene | HistogramScene, Path]:
-    """Load a scene (file, mesh or built-in name) with ``--set`` overrides; returns it and its folder.
+def load_scene(arg: str, overrides: Iterable[str] = (), alpha: float | None = None,
+               size: tuple[int, int] | None = None) -> tuple[Scene | HistogramScene, Path]:
+    """Load a scene (file, mesh or built-in name) with ``--set`` overrides and the ``--size`` (width,
+    height); returns it and its folder. A problem an override brings names the override, not the file.
 
     A file with ``kind = "histogram"`` at its top level is a histogram scene
     (gpusim.scene.histogram); any other is a geometric :class:`Scene`.
@@ -80,9 +81,14 @@ def load_scene(arg: str, overrides: Iterable[str] = (), alpha: float | None = No
     else:
         raise ConfigError(f"{path}: unsupported scene file type '{path.suffix}' "
                           f"(valid: .toml, {', '.join(MESH_SUFFIXES)})")
-    apply_overrides(table, overrides)
-    kind = HistogramScene if table.get("kind") == "histogram" else Scene
-    return build(kind, table, str(path)), path.parent
+    overrides = list(overrides)
+    labels = [f"--set {text}" for text in overrides]
+    if size is not None:
+        overrides += [f"screen.width={size[0]}", f"screen.height={size[1]}"]
+        labels += [f"--size {size[0]}x{size[1]}"] * 2
+    scene = build_overridden(lambda data, where: build(HistogramScene if data.get("kind") == "histogram" else Scene,
+                                                       data, where), table, str(path), overrides, labels=labels)
+    return scene, path.parent
 
 
 def trace_scene(scene: Scene | HistogramScene, base_dir: Path, where: str = "scene",

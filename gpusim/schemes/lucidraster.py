@@ -167,7 +167,8 @@ class LucidRaster(Scheme):
         }
         return SchemeResult(
             self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
-            dropped_fragments=int(skipped.sum()), overflowed_pixels=0, lists=CapturedLists(ep, emitted),
+            dropped_fragments=int(skipped.sum()), overflowed_pixels=len(np.unique(pix[skipped])),
+            lists=CapturedLists(ep, emitted),
             stats=stats)
 
     def _threshold_skips(self, trace, g, grid, half_block, frag_rank, by_arrival, emitted, steps) -> np.ndarray:
