@@ -303,3 +303,10 @@ def test_line_trace_shows_each_units_state_as_the_run_goes(capsys):
     assert lines[0].startswith("t=0 pass=0 | core: ") and "| memory.coalescer" not in lines[0]
     assert "coalescer: -" in lines[0] and "dram: free" in lines[0] and "rop: held" in lines[-1]
     assert m.line_trace().startswith(f"t={cycles} pass=0")
+
+
+def test_a_run_too_large_to_lower_is_refused_with_advice_that_works():
+    plan = compute_plan(["a"])
+    plan.add(0, "store", "a", 3200, 1, lambda i, s: i * 64, 64)
+    with pytest.raises(GpusimError, match=r"3,200 operations, over runner.max_operations = 1,000 .*--fidelity analytic"):
+        simulate(plan, {"a": 3200 * 64}, 3200, ["runner.max_operations=1000"])

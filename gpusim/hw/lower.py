@@ -35,7 +35,7 @@ from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, mod
 from gpusim.metrics.composite import run_starts
-from gpusim.opplan import DEFAULT_MAX_OPS, OPS, OpPlan
+from gpusim.opplan import OPS, OpPlan
 from gpusim.schemes.common.arrays import rank_in_runs
 
 #: operations whose result a later dependent operation waits for
@@ -167,9 +167,12 @@ def lower(work: Workload, gpu, keep=None) -> Program:
     """
     plan = work.plan
     total_ops = plan.total_ops()
-    if total_ops > DEFAULT_MAX_OPS:
-        raise GpusimError(f"the run would lower {total_ops:,} operations, over the limit of {DEFAULT_MAX_OPS:,}; "
-                          f"use a smaller trace or --fidelity sampled|analytic")
+    limit = gpu.runner.max_operations
+    if total_ops > limit:
+        raise GpusimError(f"the run would lower {total_ops:,} operations, over runner.max_operations = {limit:,} "
+                          f"(the event model needs about 80 bytes per operation; the sampled level lowers them all "
+                          f"before it samples); use --fidelity analytic, which estimates the run without lowering, "
+                          f"or a smaller trace")
     ws = gpu.core.warp_size
     n_pass = len(plan.passes)
     modes = [thread_mapping(gpu, p) for p in plan.passes]

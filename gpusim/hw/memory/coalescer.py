@@ -20,7 +20,7 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.hw.memory.level import MEMORY_OPS, SECTOR, MemoryLevel, Requests
-from gpusim.hw.unit import Stat, cycles, div, interleave, mod, register_unit
+from gpusim.hw.unit import FP, Stat, cycles, div, interleave, mod, register_unit
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OPS
 
@@ -47,6 +47,7 @@ class Coalescer(MemoryLevel):
 
     def __init__(self, config: CoalescerConfig, machine):
         super().__init__(machine)
+        self._access = self.next.access
         self.segment = config.segment_bytes
         mem = machine.gpu.memory
         self.icn, self.interleave = mem.interconnect_latency, mem.interleave_bytes
@@ -119,14 +120,13 @@ class Coalescer(MemoryLevel):
 
     def serve(self, wi: int, now: int) -> int:
         """Instruction ``wi`` issued at cycle ``now``: the cycle its last request is back at the core."""
-        arrive = (now + self.icn) * (1 << 16)
+        icn = self.icn
         if self._rmw[wi]:
             starts = [-1] * self.instances
-            done = self.next.access(wi, arrive, starts)
+            done = self._access(wi, (now + icn) * FP, starts)
             self.rmw_starts[wi] = starts
-        else:
-            done = self.next.access(wi, arrive, None)
-        return done + self.icn
+            return done + icn
+        return self._access(wi, (now + icn) * FP, None) + icn
 
     def values(self, total_cycles: int) -> dict:
         return {"requests": list(self.requests), "bytes": list(self.bytes)}
