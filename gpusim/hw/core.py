@@ -82,7 +82,8 @@ class SimtCore(Unit):
         self.sm_free = [0] * config.sms              # cycle each SM's issue port is free
         self.last_progress = 0                       # cycle of the last issue
         self.done = 0                                # cycle the pass's last operation completes
-        self.waiting: dict[int, tuple] = {}          # warp -> (pass, SM, instruction, unit) it waits on
+        self.waiting: dict[int, tuple] = {}          # warp -> (pass, SM, instruction, unit, event) it waits on
+        self.running = 0                             # warps taken by a slot and not finished
         # per instruction, as lists (indexed once per instruction)
         self._unit = prog.wi_unit.tolist()
         self._dep = prog.wi_dep.tolist()
@@ -136,6 +137,7 @@ class SimtCore(Unit):
         first = p.first_warp
         while queue:
             w = queue.popleft()
+            self.running += 1
             now = env.now
             t = ready[w] if ready is not None and ready[w] > now else now
             yield timeout(t - now)                   # a queue entry even at once: warps start in order
@@ -159,7 +161,9 @@ class SimtCore(Unit):
                     sm_free[sm] = now + cyc_of[wi]
                 d = serve[u](wi, now)
                 while type(d) is not int:            # the unit cannot take it yet: wait, then issue again
-                    self.waiting[first + w] = (p.name, sm, wi, self.machine.program.units[u])
+                    self.waiting[first + w] = (p.name, sm, wi, self.machine.program.units[u], d)
+                    if len(self.waiting) == self.running:
+                        self.machine.all_waiting()
                     yield d
                     del self.waiting[first + w]
                     now = env.now
@@ -169,10 +173,13 @@ class SimtCore(Unit):
                     value = d
                 if d > done:
                     done = d
+            self.running -= 1
             if done > self.done:
                 self.done = done
             for hook in hooks:
                 hook(first + w, done)
+            if self.waiting and len(self.waiting) == self.running:    # the others all wait
+                self.machine.all_waiting()
 
     def idle_at(self) -> int:
         return max(self.sm_free)

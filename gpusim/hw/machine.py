@@ -157,6 +157,18 @@ class Machine:
         if cycle > env.now:
             env.run(until=cycle)
 
+    def all_waiting(self) -> None:
+        """Every running warp waits on a unit (the core calls this when the last one starts to). If nothing
+        is left to happen (no event already triggered, no unit with timed work pending), the first unit that
+        can end its stall does (``relieve``); otherwise the run is stuck and the watchdog reports it."""
+        if any(entry[-1].triggered for entry in self.core.waiting.values()):
+            return
+        if any(getattr(u, "pending", 0) for u in self.units.values()):
+            return
+        for u in self.units.values():
+            if hasattr(u, "relieve") and u.relieve():
+                return
+
     def _watchdog(self, index: int, finished):
         """Fail pass ``index`` when no instruction issues for ``runner.no_progress_cycles`` cycles or the clock
         passes ``runner.max_cycles``; done once the pass's warps are."""
@@ -190,7 +202,7 @@ class Machine:
         waiting = self.core.waiting
         first = ""
         if waiting:
-            w, (name, sm, wi, unit) = next(iter(waiting.items()))
+            w, (name, sm, wi, unit, _) = next(iter(waiting.items()))
             ins = self.program.instruction(wi)
             first = (f"; first waiting: warp {w} of pass '{name}' on SM {sm}, instruction {wi} "
                      f"({getattr(ins, 'op', 'compute')} x{getattr(ins, 'lanes', 0)}) at the {unit}")

@@ -50,8 +50,11 @@ class RopUnit(Unit):
     issued = frozenset({"blend", "depth_test", "stencil", "program_blend"})
     STATS = (BUSY, REQUESTS, UTILISATION,
              Stat("max_reorder_occupancy", "entries", "most operations waiting in the reorder buffer"),
-             Stat("stalls", "stalls", "warp instructions stalled by a full buffer", per_instance=False))
-    COUNTERS = {"stalls": operator.add, "max_held": max}     # changed by a run; merged across processes
+             Stat("stalls", "stalls", "warp instructions stalled by a full buffer", per_instance=False),
+             Stat("overflows", "entries", "entries granted past a full buffer to end a stall that nothing else "
+                  "could end (the in-order launch real hardware has, which the model does not)",
+                  per_instance=False))
+    COUNTERS = {"stalls": operator.add, "max_held": max, "overflows": operator.add}   # merged across processes
 
     def __init__(self, config: RopConfig, machine):
         super().__init__(config.units)
@@ -65,7 +68,10 @@ class RopUnit(Unit):
         n = len(R)
         addr = R.address
         unit = interleave(addr, mem.interleave_bytes, config.units)
-        # the previous operation on the same address in submission order: pass, fragment, then program order
+        # submission order: pass, fragment, then program order; the previous operation on the same address in it
+        age = np.lexsort((prog.wi_k[wi_row], prog.wi_group[wi_row], R.thread, prog.wi_pass[wi_row]))
+        self.age = np.empty(n, np.int64)
+        self.age[age] = np.arange(n)
         order = np.lexsort((prog.wi_k[wi_row], prog.wi_group[wi_row], R.thread, prog.wi_pass[wi_row], addr))
         pred = np.full(n, -1, np.int64)
         same = np.r_[False, addr[order][1:] == addr[order][:-1]] if n else np.zeros(0, bool)
@@ -84,6 +90,9 @@ class RopUnit(Unit):
         self.held = [0] * config.units           # reorder-buffer entries in use
         self.max_held = [0] * config.units
         self.stalls = 0
+        self.overflows = 0
+        self.extra = [0] * config.units                # entries granted past the buffer's size, in use
+        self.stalled = [None] * config.units           # the oldest operation stalled on each full buffer
         self.waiting_on: dict[int, list[int]] = {}     # operation -> operations waiting for its commit
         self.commit_events: dict[int, object] = {}     # operation -> event a warp waits on for its result
         self.space = [None] * config.units             # event a warp waits on for a free entry
@@ -99,11 +108,13 @@ class RopUnit(Unit):
             p = self.pred[i]
             if p >= 0 and self.commit[p] < 0:             # must wait for the previous op on its address
                 u = self.unit[i]
-                if self.held[u] >= self.entries:          # full: the warp stalls
+                if self.held[u] >= self.entries + self.extra[u]:     # full: the warp stalls
                     self.placed[wi] = i
                     self.stalls += 1
                     if self.space[u] is None:
                         self.space[u] = self.env.event()
+                    if self.stalled[u] is None or self.age[i] < self.age[self.stalled[u]]:
+                        self.stalled[u] = i
                     return self.space[u]
                 self.held[u] += 1
                 if self.held[u] > self.max_held[u]:
@@ -144,10 +155,30 @@ class RopUnit(Unit):
             for k in self.waiting_on.pop(i, ()):
                 uk = self.unit[k]
                 self.held[uk] -= 1
+                if self.extra[uk] and self.held[uk] < self.entries + self.extra[uk]:
+                    self.extra[uk] -= 1                  # an entry past the buffer's size is given back first
                 if self.space[uk] is not None:
-                    self.space[uk].succeed()
-                    self.space[uk] = None
+                    self._wake(uk)
                 stack.append(k)
+
+    def _wake(self, u: int) -> None:
+        """Let the warps waiting for an entry of unit ``u`` try again."""
+        self.space[u].succeed()
+        self.space[u], self.stalled[u] = None, None
+
+    def relieve(self) -> bool:
+        """Every warp waits and nothing is left to happen: grant one entry past the size of the buffer whose
+        stalled operation is oldest (real hardware launches fragments in order and reserves their entries, so
+        the oldest always has one; the model launches per SM and may fill a buffer with younger operations).
+        Whether there was a stall to end."""
+        full = [u for u in range(self.instances) if self.space[u] is not None]
+        if not full:
+            return False
+        u = min(full, key=lambda u: self.age[self.stalled[u]])
+        self.extra[u] += 1
+        self.overflows += 1
+        self._wake(u)
+        return True
 
     def only_passes(self, indices) -> None:
         """Only the passes ``indices`` run here (gpusim.hw.parallel): operations of the others count as
@@ -175,8 +206,10 @@ class RopUnit(Unit):
             + f" stalls={self.stalls}"
 
     def values(self, total_cycles: int) -> dict:
-        return super().values(total_cycles) | {"max_reorder_occupancy": list(self.max_held), "stalls": self.stalls}
+        return super().values(total_cycles) | {"max_reorder_occupancy": list(self.max_held), "stalls": self.stalls,
+                                               "overflows": self.overflows}
 
     def summary(self, total_cycles: int) -> dict:
         return super().summary(total_cycles) | {"reorder_entries": self.entries, "stalls": self.stalls,
+                                                "overflows": self.overflows,
                                                 "max_reorder_occupancy": int(max(self.max_held))}

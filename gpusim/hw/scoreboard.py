@@ -59,6 +59,7 @@ class Scoreboard(Unit):
         self.holding: dict[int, list] = {}      # warp -> the cells it holds
         self.stalls = 0
         self.max_held = 0
+        self.pending = 0                        # releases scheduled and not yet done
         prog = machine.program
         self.warp_of = prog.wi_warp.tolist()
         rows = prog.rows_of(self.name)
@@ -106,11 +107,13 @@ class Scoreboard(Unit):
             return
 
         def release(_event):
+            self.pending -= 1
             for c in cells:
                 ev = self.held.pop(c)
                 if ev is not None:
                     ev.succeed()
             self._wake_next()
+        self.pending += 1
         self.env.timeout(max(at - self.env.now, 0)).callbacks.append(release)
 
     def blocked(self) -> list[str]:
