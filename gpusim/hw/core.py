@@ -184,9 +184,6 @@ class SimtCore(Unit):
     def idle_at(self) -> int:
         return max(self.sm_free)
 
-    def summary(self, total_cycles: int) -> dict:
-        return super().summary(total_cycles)
-
     def line_trace(self) -> str:
         return (f"core: last issue at {self.last_progress} waiting={len(self.waiting)} "
                 + " ".join(f"[{i}] free={f}" for i, f in enumerate(self.sm_free[:8])))
