@@ -84,11 +84,9 @@ class SimtCore(Unit):
         self.done = 0                                # cycle the pass's last operation completes
         self.waiting: dict[int, tuple] = {}          # warp -> (pass, SM, instruction, unit, event) it waits on
         self.running = 0                             # warps taken by a slot and not finished
-        # per instruction, as lists (indexed once per instruction)
-        self._unit = prog.wi_unit.tolist()
-        self._dep = prog.wi_dep.tolist()
-        self._produces = prog.wi_produces.tolist()
-        self._cycles = prog.wi_cycles.tolist()
+        # per instruction: (unit, depends, produces, issue cycles), as one list the slots index once each
+        self._instructions = list(zip(prog.wi_unit.tolist(), prog.wi_dep.tolist(), prog.wi_produces.tolist(),
+                                      prog.wi_cycles.tolist()))
         # port occupancy and instructions per SM (static: where each warp runs is fixed)
         sm = np.zeros(prog.instructions, np.int64)
         for p in prog.passes:
@@ -131,7 +129,7 @@ class SimtCore(Unit):
         read from the environment only after waiting on a unit's event."""
         env = self.env
         timeout = env.timeout
-        unit_of, dep_of, prod_of, cyc_of = self._unit, self._dep, self._produces, self._cycles
+        instructions = self._instructions
         sm_free = self.sm_free
         hooks = self.machine.warp_end_hooks
         first = p.first_warp
@@ -143,22 +141,22 @@ class SimtCore(Unit):
             yield timeout(t - now)                   # a queue entry even at once: warps start in order
             now = t
             value = done = now
-            for wi in range(wi_start[w], wi_start[w + 1]):
-                u = unit_of[wi]
+            lo = wi_start[w]
+            for wi, (u, dep, produces, cyc) in enumerate(instructions[lo:wi_start[w + 1]], lo):
                 if u == COMPUTE:                     # ALU work: holds the port, the next instruction waits
                     f = sm_free[sm]
-                    sm_free[sm] = (f if f > now else now) + cyc_of[wi]
+                    sm_free[sm] = (f if f > now else now) + cyc
                     continue
-                if dep_of[wi] and value > now:       # wait for the result it depends on
+                if dep and value > now:              # wait for the result it depends on
                     yield timeout(value - now)
                     now = value
                 f = sm_free[sm]
                 if f > now:                          # the issue port is taken until f
-                    sm_free[sm] = f + cyc_of[wi]
+                    sm_free[sm] = f + cyc
                     yield timeout(f - now)
                     now = f
                 else:
-                    sm_free[sm] = now + cyc_of[wi]
+                    sm_free[sm] = now + cyc
                 d = serve[u](wi, now)
                 while type(d) is not int:            # the unit cannot take it yet: wait, then issue again
                     self.waiting[first + w] = (p.name, sm, wi, self.machine.program.units[u], d)
@@ -169,7 +167,7 @@ class SimtCore(Unit):
                     now = env.now
                     d = serve[u](wi, now)
                 self.last_progress = now
-                if prod_of[wi]:
+                if produces:
                     value = d
                 if d > done:
                     done = d
