@@ -15,6 +15,13 @@ from pathlib import Path
 from typing import IO, Iterator
 
 
+def _mode(full: int) -> int:
+    """``full`` (0o666 for a file, 0o777 for a folder) less the process's umask: the mode ``open`` gives."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return full & ~mask
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     """Open a temporary file beside ``path``; on success move it onto ``path``.
@@ -25,7 +32,7 @@ def atomic_output(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    os.chmod(tmp, 0o644)                   # readable like any output (mkstemp makes it private)
+    os.chmod(tmp, _mode(0o666))            # as open() would make it (mkstemp makes it private)
     try:
         with os.fdopen(fd, mode) as handle:
             yield handle
@@ -58,7 +65,7 @@ def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
                 os.replace(item, target / item.name)
             tmp.rmdir()
         else:
-            os.chmod(tmp, 0o755)               # an ordinary folder (mkdtemp makes it private)
+            os.chmod(tmp, _mode(0o777))        # an ordinary folder (mkdtemp makes it private)
             os.replace(tmp, target)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

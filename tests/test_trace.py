@@ -127,3 +127,18 @@ def test_depth_complexity_and_pixel_ids():
     dc = t.depth_complexity()
     assert dc.shape == (3, 4) and dc[0, 0] == 2 and dc[2, 3] == 1 and dc.sum() == 3
     np.testing.assert_array_equal(t.pixel_ids(), [0, 0, 11])
+
+
+def test_outputs_follow_the_umask(tmp_path):
+    import os
+
+    from gpusim.atomic_io import atomic_folder, write_text_atomic
+    old = os.umask(0o027)
+    try:
+        write_text_atomic(tmp_path / "a.txt", "x")
+        with atomic_folder(tmp_path / "d") as d:
+            (d / "f").write_text("y")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o640
+    assert (tmp_path / "d").stat().st_mode & 0o777 == 0o750
