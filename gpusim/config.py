@@ -156,6 +156,9 @@ def parse_override(text: str, option: str = "--set", example: str = "camera.fov_
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw.strip()
+    except RecursionError:
+        raise ConfigError(f"{option} {key.strip()}=...: the value nests arrays or tables too deeply; "
+                          f"flatten it") from None
     return parts, value
 
 
@@ -230,6 +233,8 @@ def load_toml(path: str | Path) -> dict:
             from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: invalid TOML ({exc})") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: arrays or tables nested too deeply for the TOML reader; flatten them") from None
 
 
 def to_dict(obj: Any) -> Any:

@@ -20,6 +20,7 @@ The arrays are never copied into Python lists; all checks are vectorised.
 
 from __future__ import annotations
 
+import reprlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,7 +48,7 @@ class FragmentTrace:
 
     ``meta`` is free metadata (JSON-serialisable): scene name, generator,
     gpusim version, background colour (``background``: RGB in [0, 1]).
-    Construction validates shapes, dtypes and ranges and raises
+    Construction validates shapes, dtypes and ranges (and the background) and raises
     :class:`~gpusim.errors.TraceError` naming the first offending fragment.
     """
 
@@ -94,12 +95,25 @@ class FragmentTrace:
             elif arr.shape[0] != n:
                 self._fail(f"array '{name}' has {arr.shape[0]} entries but 'x' has {n}",
                            "all arrays must have one entry per fragment")
+        self._check_background()
         if n == 0:
             return
         self._check_below(self.x, self.width, "x", "pixel column")
         self._check_below(self.y, self.height, "y", "pixel row")
         self._check_unit_interval(self.z, "depth")
         self._check_unit_interval(self.rgba, "colour/alpha")
+
+    def _check_background(self) -> None:
+        if "background" not in self.meta:
+            return
+        value = self.meta["background"]
+        try:
+            rgb = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            rgb = None
+        if rgb is None or rgb.shape != (3,) or not np.all((rgb >= 0.0) & (rgb <= 1.0)):  # NaN fails too
+            self._fail(f"metadata background {reprlib.repr(value)} is not an RGB colour in [0, 1]",
+                       "set it to three numbers such as [1.0, 1.0, 1.0], or re-create the trace")
 
     def _check_below(self, arr: np.ndarray, limit: int, name: str, what: str) -> None:
         if int(arr.max()) >= limit:

@@ -30,20 +30,24 @@ CHUNK_ROWS = 1 << 20
 
 
 def _count_rows(path: Path) -> int:
-    """Number of data rows (non-empty lines after the header), counted in binary blocks."""
+    """Number of data rows (lines after the header), counted in binary blocks. A line ends, as pandas reads
+    it, in LF, CRLF or a lone CR (old Mac files)."""
     lines, last = 0, b"\n"
     with open(path, "rb") as handle:
         while block := handle.read(1 << 24):
-            lines += block.count(b"\n")
+            lines += block.count(b"\n") + block.count(b"\r") - block.count(b"\r\n")
+            lines -= last == b"\r" and block[:1] == b"\n"        # a CRLF split between two blocks
             last = block[-1:]
-    if last != b"\n":
+    if last not in (b"\n", b"\r"):
         lines += 1
     return max(lines - 1, 0)
 
 
 def _numeric(chunk: pd.DataFrame, column: str, path: Path, first_row: int) -> np.ndarray:
     series = chunk[column]
-    if not pd.api.types.is_numeric_dtype(series) or pd.api.types.is_bool_dtype(series):
+    if pd.api.types.is_bool_dtype(series):     # pandas reads a column of true/false as booleans: not numbers
+        series = series.astype(str)
+    if not pd.api.types.is_numeric_dtype(series):
         coerced = pd.to_numeric(series, errors="coerce")
         bad = np.flatnonzero(coerced.isna().to_numpy())
         if bad.size:
@@ -116,6 +120,9 @@ def _fill(path: Path, columns: list[str], n: int, width: int, height: int, out: 
     except (pd.errors.ParserError, pd.errors.ParserWarning) as exc:
         raise TraceError(f"{path}: malformed CSV ({str(exc).strip().splitlines()[0]}); every row needs "
                          f"exactly {len(columns)} fields") from None
+    except UnicodeDecodeError as exc:
+        raise TraceError(f"{path}: holds bytes that are not UTF-8 text ({exc.reason}); save the CSV as UTF-8 "
+                         f"text") from None
     return pos
 
 
@@ -129,6 +136,9 @@ def read_csv_trace(path: str | os.PathLike, width: int, height: int,
         header = pd.read_csv(path, nrows=0).columns
     except (pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise TraceError(f"{path}: not a CSV file with a header line x,y,z,r,g,b,a ({exc})") from None
+    except pd.errors.ParserError as exc:   # e.g. a quote left open: pandas reads past the header to find its end
+        raise TraceError(f"{path}: malformed CSV ({str(exc).strip().splitlines()[0]}); close every quote "
+                         f"and give every row the header's fields") from None
     columns = [str(c).strip() for c in header]
     missing = [c for c in REQUIRED if c not in columns]
     if missing:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -59,13 +60,24 @@ def load_trace(path: str | os.PathLike) -> FragmentTrace:
                                  f"reads ({FORMAT_VERSION}); upgrade gpusim")
             if version < 1:
                 raise TraceError(f"{path}: invalid trace format version {version}; {fix}")
-            width, height = int(npz["width"]), int(npz["height"])
+            dims = [npz["width"], npz["height"]]
+            if any(d.shape != () or d.dtype.kind not in "iu" for d in dims):
+                raise TraceError(f"{path}: the screen width and height are not integers "
+                                 f"({dims[0]!r:.40}, {dims[1]!r:.40}); {fix}")
+            width, height = (int(d) for d in dims)
             meta = json.loads(str(npz["meta_json"]))
             arrays = {name: npz[name] for name in DTYPES}
     except TraceError:
         raise
-    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError) as exc:
+        # NotImplementedError: a compression method zipfile lacks; RuntimeError: a member marked encrypted,
+        # or metadata nested too deep for the JSON parser (RecursionError)
         raise TraceError(f"{path}: truncated or corrupted trace file ({exc}); {fix}") from None
+    except tokenize.TokenError:        # numpy tokenizes an array header it cannot parse
+        raise TraceError(f"{path}: corrupted trace file (an array header is malformed); {fix}") from None
+    except MemoryError:                # an array header declares a size beyond memory
+        raise TraceError(f"{path}: an array in the file declares more data than memory holds; the file is "
+                         f"corrupted, or too large for this machine") from None
     except (ValueError, OSError, json.JSONDecodeError, TypeError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise TraceError(f"{path}: unreadable trace file ({msg}); {fix}") from None

@@ -37,6 +37,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gpusim: interrupted; no output was left half-written", file=sys.stderr)
         return 130
+    except MemoryError:                # a size in the input beyond this machine (outputs are atomic: none left)
+        print("gpusim: error: out of memory: the input asks for more than this machine holds; use a smaller "
+              "screen, scene, trace or GPU", file=sys.stderr)
+        return 2
     except BrokenPipeError:            # the reader went away (e.g. '| head'): stop quietly, like other tools
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

@@ -42,7 +42,9 @@ def save_heatmap_png(values: np.ndarray, path: str | os.PathLike, title: str, la
 
     values = np.asarray(values)
     height, width = values.shape
-    fig = Figure(figsize=(6.4, 6.4 * height / width + 0.6), dpi=100)
+    # a map taller than 3:2 is drawn narrower in a figure of that height (a 1 x 16384 screen must not make a
+    # figure matplotlib refuses to draw)
+    fig = Figure(figsize=(6.4, 6.4 * min(height / width, 1.5) + 0.6), dpi=100)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     norm = LogNorm(vmin=1, vmax=max(int(values.max()), 2)) if log and values.max() > 0 else None

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import ClassVar, Literal
 
 from gpusim.config import param
+from gpusim.scene.camera import look_at
 
 Vec3 = tuple[float, float, float]
 
@@ -44,6 +45,11 @@ class Camera:
             raise ValueError(f"far ({self.far}) must be greater than near ({self.near})")
         if self.eye == self.target:
             raise ValueError("eye and target must differ")
+        try:
+            look_at(self.eye, self.target, self.up)
+        except ValueError:
+            raise ValueError("up: zero or parallel to the viewing direction (target - eye), which leaves the "
+                             "camera's roll undefined; give another direction, e.g. up = [0.0, 1.0, 0.0]") from None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,6 +85,9 @@ class ObjectSpec:
     def __post_init__(self) -> None:
         if any(not 0.0 <= c <= 1.0 for c in self.color):
             raise ValueError("color components must lie in [0, 1]")
+        if self.shading == "lambert" and 0.0 in self.scale:
+            raise ValueError(f"scale: {list(self.scale)} flattens the object, which leaves Lambert shading no "
+                             f"normals; give non-zero scales or shading = \"flat\"")
 
 
 def _register(name: str):
