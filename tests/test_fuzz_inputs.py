@@ -64,19 +64,9 @@ def run_child(argv: list[str], cwd: Path, timeout: float = 45) -> tuple[int, str
     return proc.returncode, proc.stdout, proc.stderr
 
 
-# Bugs this file found in code another change owns (gpusim/hw): each case stays, expected to fail in exactly
-# this way until that fix lands (strict: the day it passes, the mark must go).
-KNOWN_BUGS = {
-    "levels-empty": "GpuConfig._check (gpusim/hw/gpu.py) reads memory.levels[0] of an empty list: IndexError",
-    "gpu-set-empty-levels": "GpuConfig._check (gpusim/hw/gpu.py) reads memory.levels[0] of an empty list: "
-                            "IndexError",
-}
-
-
 def cases(table: dict) -> list:
-    """The keys of ``table`` as parameters, the known bugs marked."""
-    return [pytest.param(k, marks=pytest.mark.xfail(raises=IndexError, strict=True, reason=KNOWN_BUGS[k]))
-            if k in KNOWN_BUGS else k for k in table]
+    """The keys of ``table`` as parameters."""
+    return list(table)
 
 
 @pytest.fixture(scope="module")

@@ -310,3 +310,14 @@ def test_a_run_too_large_to_lower_is_refused_with_advice_that_works():
     plan.add(0, "store", "a", 3200, 1, lambda i, s: i * 64, 64)
     with pytest.raises(GpusimError, match=r"3,200 operations, over runner.max_operations = 1,000 .*--fidelity analytic"):
         simulate(plan, {"a": 3200 * 64}, 3200, ["runner.max_operations=1000"])
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("memory.levels", "[]", "memory path is empty"),
+    ("core.sms", 10**9, "core.sms: must be <= 4096"),
+    ("rop.units", 10**6, "rop.units: must be <= 4096"),
+    ("memory.partitions", 5000, "memory.partitions: must be <= 1024"),
+])
+def test_gpu_configs_no_machine_could_be_fail_at_load(key, value, match):
+    with pytest.raises(ConfigError, match=match):
+        load_gpu("gtx280", [f"{key}={value}"])

@@ -34,11 +34,11 @@ from gpusim.hw.unit import Unit, occupancy_stats, register_unit
 class CoreConfig:
     """SIMT cores (streaming multiprocessors) and their warp schedulers."""
 
-    sms: int = param(30, unit="SMs", doc="streaming multiprocessors", min=1)
+    sms: int = param(30, unit="SMs", doc="streaming multiprocessors", min=1, max=4096)
     warp_size: int = param(32, unit="threads", doc="threads per warp", min=1, max=1024)
     lanes_per_sm: int = param(8, unit="lanes", doc="scalar lanes per SM (a warp instruction issues over "
                               "warp_size / lanes_per_sm cycles)", min=1)
-    warps_per_sm: int = param(32, unit="warps", doc="resident warps per SM (latency hiding)", min=1)
+    warps_per_sm: int = param(32, unit="warps", doc="resident warps per SM (latency hiding)", min=1, max=1024)
     clock_mhz: float = param(1296.0, unit="MHz", doc="shader clock: the model's cycle", gt=0)
     instructions_per_op: int = param(4, unit="instructions", doc="ALU instructions a thread issues per memory "
                                      "operation (address arithmetic, the shader or rasterizer work around it)",

@@ -133,6 +133,9 @@ class GpuConfig:
     def _check(self) -> None:
         """Checks across sections (each section checks its own fields)."""
         levels = self.memory.levels
+        if not levels:
+            raise ValueError("memory.levels: the memory path is empty; name its levels, e.g. "
+                             "['coalescer', 'l2', 'dram']")
         for name in levels:
             if name not in UNITS or not issubclass(UNITS[name], MemoryLevel):
                 valid = [n for n, c in UNITS.items() if issubclass(c, MemoryLevel)]

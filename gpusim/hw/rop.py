@@ -35,7 +35,8 @@ PROGRAM_BLEND = OPS.index("program_blend")
 class RopConfig:
     """ROP units with a reorder buffer (fixed-function blend, depth test, stencil)."""
 
-    units: int = param(32, unit="ROPs", doc="ROP units (pixels interleaved across them by address)", min=1)
+    units: int = param(32, unit="ROPs", doc="ROP units (pixels interleaved across them by address)", min=1,
+                       max=4096)
     reorder_entries: int = param(64, unit="fragments", doc="reorder-buffer entries per ROP unit; a full "
                                  "buffer stalls the core", min=1)
     ops_per_cycle: float = param(0.5, unit="fragments/cycle", doc="operations committed per ROP unit per "

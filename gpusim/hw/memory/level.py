@@ -37,7 +37,7 @@ class MemoryConfig:
     """Memory partitions: address interleaving, the core-partition interconnect, the memory path."""
 
     partitions: int = param(8, unit="partitions", doc="memory partitions (each holds one instance of every "
-                            "memory level and one atomic unit)", min=1)
+                            "memory level and one atomic unit)", min=1, max=1024)
     interleave_bytes: int = param(256, unit="bytes", doc="address interleave granularity across partitions",
                                   min=1)
     interconnect_latency: int = param(20, unit="cycles", doc="core to partition latency (each way)", min=0)
