@@ -99,3 +99,20 @@ def test_existing_output_survives_a_failed_run(tmp_path, capsys):
     code, _, _ = run(capsys, "trace", "coplanar", "--set", "objects.0.alpha=7", "-o", str(out))
     assert code == 2 and out.read_bytes() == before
     np.testing.assert_array_equal(load_trace(out).x, load_trace(out).x)
+
+
+def test_sigterm_during_trace_leaves_no_partial_file(tmp_path):
+    # SIGTERM while the output is being written (its hidden temporary file exists): before, the process died at
+    # once and left the temporary file (hundreds of MB) beside the output
+    import signal
+    import time
+    out = tmp_path / "big.npz"
+    proc = subprocess.Popen([sys.executable, "-m", "gpusim", "trace", "foliage", "--size", "1200x1200", "-o", str(out),
+                             "--no-progress"], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob(".big.npz.*")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "interrupted" in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []             # neither the output nor a hidden temporary file

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 
 from gpusim import __version__
 from gpusim.cli import (config_cmd, info_cmd, replay_cmd, report_cmd, run_cmd, schemes_cmd, show_cmd,
@@ -29,6 +31,9 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help(sys.stderr)
         return 2
+    previous = None
+    if threading.current_thread() is threading.main_thread():      # SIGTERM stops a command like Ctrl-C: the
+        previous = signal.signal(signal.SIGTERM, _terminate)       # half-written outputs are removed
     try:
         return args.run(args)
     except GpusimError as exc:
@@ -50,6 +55,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gpusim: error: {where}{exc.strerror or exc}; check the path, its permissions and the free space",
               file=sys.stderr)
         return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(signum, frame):
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 import sys
 from pathlib import Path
 
@@ -29,10 +28,6 @@ def add_parser(sub) -> None:
     p.set_defaults(run=run)
 
 
-def _terminate(signum, frame):                # SIGTERM: stop like Ctrl-C (finished runs are kept)
-    raise KeyboardInterrupt
-
-
 def run(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise GpusimError(f"--workers {args.workers}: give at least 1 (1 runs in this process)")
@@ -40,8 +35,7 @@ def run(args) -> int:
         raise GpusimError("--workers and --cluster exclude each other: the cluster's workers run the tasks")
     exp = load_experiment(args.file, args.set)
     out = Path(args.output or Path("reports") / exp.name)
-    previous = signal.signal(signal.SIGTERM, _terminate)
-    try:
+    try:                                      # SIGTERM arrives as KeyboardInterrupt (gpusim.cli.main)
         summary = run_experiment(exp, out, args.workers, args.cluster, args.quiet)
         if not args.no_report:
             from gpusim.report.experiment import write_report
@@ -53,8 +47,6 @@ def run(args) -> int:
                 if (out / "runs").is_dir() else "nothing was written")
         print(f"gpusim: interrupted; {kept}", file=sys.stderr)
         return 130
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     lines = describe_summary(summary)
     for line in lines[:-1]:
         print(line, file=sys.stderr if args.quiet else sys.stdout)
