@@ -87,23 +87,23 @@ def run_functional(trace: FragmentTrace, scheme: str, params: dict[str, Any] | N
     return result, record, reference
 
 
-def run_timing(result: SchemeResult, trace: FragmentTrace, fidelity: str, gpu=None, reference=None
-               ) -> tuple[dict, dict | None, Any]:
+def run_timing(result: SchemeResult, trace: FragmentTrace, fidelity: str, gpu=None, reference=None,
+               progress=None) -> tuple[dict, dict | None, Any]:
     """One timing level on a functional result: (timing record, resolved GPU config or None, timed image or
     None). The timed image is the image in event order, with its RMW artifacts, where the level replays
-    them."""
+    them. ``progress``: a tqdm-like bar the full level counts its warps on."""
     if fidelity not in FIDELITIES:
         raise ConfigError(f"--fidelity {fidelity}: unknown fidelity level (valid: {', '.join(FIDELITIES)})")
     if gpu is None and fidelity != "thesis":
         gpu = load_gpu()
     start = time.perf_counter()
-    timing, timed_image = FIDELITIES[fidelity](result, trace, gpu, reference)
+    timing, timed_image = FIDELITIES[fidelity](result, trace, gpu, reference, progress=progress)
     timing = timing | {"wall_seconds": time.perf_counter() - start}
     return timing, (gpu.to_dict() if gpu is not None else None), timed_image
 
 
 def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = None,
-           fidelity: str | None = None, gpu=None) -> tuple[SchemeResult, dict, Any, Any]:
+           fidelity: str | None = None, gpu=None, progress=None) -> tuple[SchemeResult, dict, Any, Any]:
     """Run ``scheme`` (and the timing model ``fidelity`` on ``gpu``, if given).
 
     Returns (result, record, image, reference). With a timing level that
@@ -114,7 +114,7 @@ def replay(trace: FragmentTrace, scheme: str, params: dict[str, Any] | None = No
         raise ConfigError(f"--fidelity {fidelity}: unknown fidelity level (valid: {', '.join(FIDELITIES)})")
     result, record, reference = run_functional(trace, scheme, params)
     if fidelity is not None:
-        timing, gpu_config, timed_image = run_timing(result, trace, fidelity, gpu, reference)
+        timing, gpu_config, timed_image = run_timing(result, trace, fidelity, gpu, reference, progress)
         record["timing"] = timing
         if gpu_config is not None:
             record["gpu_config"] = gpu_config

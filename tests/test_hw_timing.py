@@ -196,3 +196,22 @@ def test_a_valid_config_never_deadlocks_on_a_full_reorder_buffer():
     assert runs[0]["units"]["rop"]["overflows"] >= 1
     stats = {(s["unit"], s["stat"]): s["value"] for s in runs[0]["unit_stats"] if s["labels"] == ""}
     assert stats[("rop", "overflows")] == runs[0]["units"]["rop"]["overflows"]
+
+
+def test_full_level_counts_its_warps_on_a_progress_bar(nested):
+    class Bar:                                   # the part of tqdm's interface the machine uses
+        total, n, updates = 0, 0, 0
+
+        def reset(self, total):
+            self.total, self.n = total, 0
+
+        def update(self, k):
+            self.n += k
+            self.updates += 1
+
+    bar = Bar()
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    with_bar = replay(nested, "depth-peeling", {}, "full", gpu, bar)[1]["timing"]
+    without = replay(nested, "depth-peeling", {}, "full", gpu)[1]["timing"]
+    assert bar.total > 0 and bar.n == bar.total and bar.updates > len(with_bar["passes"]) // 2
+    assert with_bar["cycles"] == without["cycles"]        # the bar's process changes no figure

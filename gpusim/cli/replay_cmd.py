@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +36,7 @@ def add_parser(sub) -> None:
     p.add_argument("--gpu-set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a GPU config key (repeatable), e.g. --gpu-set rop.reorder_entries=16")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
+    p.add_argument("--no-progress", action="store_true", help="never show the full level's progress bar")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="write image.png, difference.png and stats.json to DIR")
     p.set_defaults(run=run)
@@ -63,7 +65,10 @@ def run(args) -> int:
     trace = load_trace(args.trace)
     params = parse_params(args.param)
     gpu = load_gpu(args.gpu, args.gpu_set) if args.fidelity else None
-    result, record, image, reference = replay(trace, args.scheme, params, args.fidelity, gpu)
+    from tqdm import tqdm
+    with tqdm(total=0, unit="warp", unit_scale=True, file=sys.stderr, dynamic_ncols=True, leave=False,
+              disable=True if args.no_progress else None, desc="full level") as bar:   # on a terminal only
+        result, record, image, reference = replay(trace, args.scheme, params, args.fidelity, gpu, bar)
     text = None if args.json else _text(args, record)    # formatted before anything is written
     if out is not None:
         _write_outputs(out, record, image, reference, result.extras.get("timed_image"))

@@ -84,6 +84,7 @@ class SimtCore(Unit):
         self.done = 0                                # cycle the pass's last operation completes
         self.waiting: dict[int, tuple] = {}          # warp -> (pass, SM, instruction, unit, event) it waits on
         self.running = 0                             # warps taken by a slot and not finished
+        self.warps_done = 0
         # per instruction: (unit, depends, produces, issue cycles), as one list the slots index once each
         self._instructions = list(zip(prog.wi_unit.tolist(), prog.wi_dep.tolist(), prog.wi_produces.tolist(),
                                       prog.wi_cycles.tolist()))
@@ -172,6 +173,7 @@ class SimtCore(Unit):
                 if d > done:
                     done = d
             self.running -= 1
+            self.warps_done += 1
             if done > self.done:
                 self.done = done
             for hook in hooks:

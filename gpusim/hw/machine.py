@@ -32,6 +32,9 @@ from gpusim.hw.program import Program
 from gpusim.hw.unit import UNITS
 
 
+PROGRESS_CYCLES = 4096      # cycles between progress-bar updates (an event each: a fraction of a percent)
+
+
 class NoProgress(GpusimError):
     """The event model stopped making progress (a diagnosis names the unit and queue)."""
 
@@ -39,8 +42,9 @@ class NoProgress(GpusimError):
 class Machine:
     """A GPU built for one program: only the units its instructions reach."""
 
-    def __init__(self, gpu, program: Program, width: int):
+    def __init__(self, gpu, program: Program, width: int, progress=None):
         self.gpu, self.program, self.width = gpu, program, width
+        self.progress = progress                 # a tqdm-like bar counting warps done, or None
         self.env = simpy.Environment()
         self.warp_end_hooks: list = []           # called (warp, cycle its last operation completes)
         self.units: dict = {}
@@ -102,6 +106,9 @@ class Machine:
         try:
             shares = plan_shares(self)
             if len(shares) > 1 and run_shares(self, shares):
+                if self.progress is not None:
+                    self.progress.reset(total=self.program.warps)
+                    self.progress.update(self.program.warps)
                 return self.now
             self.pass_cycles = [c for _, c in self.run_share(range(len(self.program.passes)))]
             return self.now
@@ -143,7 +150,11 @@ class Machine:
         env.process(self._watchdog(p.index, finished))
         if self.gpu.runner.trace_every:
             env.process(self._tracer(p.index, finished))
+        if self.progress is not None:
+            env.process(self._report(p.index, finished))
         env.run(until=finished)
+        if self.progress is not None:
+            self.progress.update(core.warps_done - self.progress.n)
         # a barrier: the pass ends when its last operation has completed and every unit is idle again
         end = max(core.done, floor, *(u.idle_at() for u in self.units.values()))
         self.guard_max(end)
@@ -181,6 +192,17 @@ class Machine:
             self.guard_max(env.now)
             if env.now > core.last_progress + runner.no_progress_cycles:
                 raise NoProgress(self.diagnosis(runner.no_progress_cycles, core.last_progress))
+
+    def _report(self, index: int, finished):
+        """Count the warps done on the progress bar every ``PROGRESS_CYCLES`` while pass ``index`` runs."""
+        bar, core = self.progress, self.core
+        if bar.total != self.program.warps:
+            bar.reset(total=self.program.warps)
+        while True:
+            bar.update(core.warps_done - bar.n)
+            if finished.triggered or self.current_pass != index:
+                return
+            yield self.env.timeout(PROGRESS_CYCLES)
 
     def _tracer(self, index: int, finished):
         """Print :meth:`line_trace` to stderr every ``runner.trace_every`` cycles while pass ``index`` runs."""

@@ -74,6 +74,7 @@ def plan_shares(machine) -> list[list[int]]:
 
 def _child(machine, share: list[int], conn) -> None:
     try:
+        machine.progress = None            # the parent's bar: counted there once the shares are back
         timeline = machine.run_share(share)
         coalescer = machine.units.get("coalescer")
         rmw = coalescer.rmw_start_arrays() if coalescer is not None and coalescer.rmw_starts is not None else None

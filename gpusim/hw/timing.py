@@ -66,15 +66,15 @@ def _hazards(rec: dict, program: Program, machine: Machine, work: Workload, resu
     return image
 
 
-def run_full(work: Workload, gpu, result=None, reference=None, program: Program | None = None
-             ) -> tuple[dict, object]:
+def run_full(work: Workload, gpu, result=None, reference=None, program: Program | None = None,
+             progress=None) -> tuple[dict, object]:
     """The event model on ``work`` (or on an already lowered sample of it); (record, image with RMW artifacts
-    or None)."""
+    or None). ``progress``: a tqdm-like bar to count the warps done on."""
     start = time.perf_counter()
     sampled = program is not None
     if program is None:
         program = lower(work, gpu)
-    machine = Machine(gpu, program, work.width)
+    machine = Machine(gpu, program, work.width, progress)
     total = machine.run()
     rec = _base(gpu, "full", program, program.operations)
     rec["passes"] = [{"name": p.name, "kind": p.kind, "cycles": c, "warps": p.warps}
@@ -211,16 +211,19 @@ def run_analytic(work, gpu, result=None, reference=None) -> tuple[dict, None]:
 
 
 def _on_workload(run, name: str):
-    def level(result, trace, gpu, reference=None):
+    def level(result, trace, gpu, reference=None, progress=None):
+        if run is run_full:
+            return run(Workload.of(result, trace), gpu, result, reference, progress=progress)
         return run(Workload.of(result, trace), gpu, result, reference)
     level.__name__ = f"{name}_timing"
     return level
 
 
-def _thesis(result, trace=None, gpu=None, reference=None):
+def _thesis(result, trace=None, gpu=None, reference=None, progress=None):
     return thesis_timing(result), None
 
 
-#: the fidelity levels by name: ``level(result, trace, gpu, reference) -> (record, timed image or None)``
+#: the fidelity levels by name: ``level(result, trace, gpu, reference, progress=None) -> (record, timed image or
+#: None)``; the full level counts warps done on ``progress`` (a tqdm-like bar)
 FIDELITIES = {"analytic": _on_workload(run_analytic, "analytic"), "sampled": _on_workload(run_sampled, "sampled"),
               "full": _on_workload(run_full, "full"), "thesis": _thesis}
