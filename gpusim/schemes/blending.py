@@ -98,6 +98,7 @@ class AlphaBlend(Scheme):
         plan = OpPlan(passes, (["depth_buffer"] if prepass else []) + ["framebuffer"])
         if prepass:
             colour, blended, culled = _opaque_prepass(trace, g, plan, 0, cb, rnd)
+            colour = rnd(colour)   # the cleared background is held in the framebuffer's format too
             t_idx = np.flatnonzero(~trace.opaque)
             plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
         else:

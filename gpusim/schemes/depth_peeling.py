@@ -88,7 +88,8 @@ class DepthPeeling(Scheme):
                  seq_pass=2 * np.arange(peels) + 1)
 
         order = g.by_depth
-        first_of_depth = np.r_[True, (pix[order][1:] != pix[order][:-1]) | (g.key[order][1:] != g.key[order][:-1])]
+        first_of_depth = np.r_[True, (pix[order][1:] != pix[order][:-1])
+                               | (g.key[order][1:] != g.key[order][:-1])][:n]   # [:n]: no entry when n = 0
         keep = first_of_depth & (d[order] < peels)
         lost = order[~keep]                        # tie losses and layers past the cap
         order = order[keep]
