@@ -70,10 +70,10 @@ class Coalescer(MemoryLevel):
         parts = (zip(R.parts, R.offsets()) if len(R.parts) <= 64
                  else [((None, R.address, R.nbytes, None), 0)])
         chunks = [q for part, off in parts for q in self._requests(part, off, los, counts, wis)]
-        for q in chunks:
-            self.requests = (np.asarray(self.requests) + np.bincount(q.partition, minlength=self.instances)).tolist()
-            self.bytes = (np.asarray(self.bytes) + np.bincount(q.partition, weights=q.nbytes,
-                                                               minlength=self.instances)).astype(np.int64).tolist()
+        P = self.instances
+        self.requests = sum(np.bincount(q.partition, minlength=P) for q in chunks).tolist()
+        self.bytes = sum(np.bincount(q.partition, weights=q.nbytes, minlength=P) for q in chunks
+                         ).astype(np.int64).tolist()
         self.next.prepare(chunks, write)
 
     def _requests(self, part, off: int, los: np.ndarray, counts: np.ndarray, wis: np.ndarray,
