@@ -13,9 +13,12 @@ outside the modelled passes (the driver, the CPU, the PBO draw).
 
 from __future__ import annotations
 
+from itertools import combinations
+
 import pandas as pd
 
-from gpusim.papers.base import NOT_MODELLED, Comparison, Missing, PaperRow, fps, guarded, one, select
+from gpusim.papers.base import (NOT_MODELLED, WITHIN_1_5X, Comparison, Missing, PaperRow, fps, guarded, mark, one,
+                                order_row, select, summary_row)
 
 MODELS = ("Dragon", "Buddha", "Lucy", "Neptune", "Bunny")
 SCENE = {"Dragon": "like-dragon", "Buddha": "like-buddha", "Lucy": "like-lucy", "Neptune": "like-neptune",
@@ -38,9 +41,13 @@ TABLE_3 = {
 VARIANT = {"MDTS": "freepipe-mdts", "ABS": "freepipe-abuffer", "K-buffer": "kbuffer", "BDP": None, "BDP2": None,
            "ADP": None, "SRAB": "stencil-routed-abuffer", "Liu": None, "DDP": "dual-depth-peeling",
            "DP": "depth-peeling"}
-#: the ratios section 5 argues from (Table 3, same model)
+#: the ratios section 5 argues from (Table 3, same model); every other pair of modelled methods is compared too
 RATIOS = (("ABS", "MDTS"), ("MDTS", "DP"), ("ABS", "DP"), ("MDTS", "DDP"), ("ABS", "SRAB"), ("K-buffer", "ABS"),
           ("DDP", "DP"))
+#: the ratios the short paper's text and Table 1 argue from
+RATIOS_001 = (("CUDP2", "CUDP1"), ("CUDP1", "DP"), ("CUDP2", "DP"), ("CUDP2", "SRAB"))
+#: the share of method pairs whose frame-rate ratio must come within 1.5x of the paper's
+PAIRS_TARGET = 0.8
 #: Table 2 (opaque, FreePipe and OpenGL frame rates)
 TABLE_2 = {"FreePipe": (322, 256, 183, 98, 645), "OpenGL": (425, 317, 212, 47, 1255)}
 #: seed 001 Table 1: model -> CUDP1, CUDP2, SRAB, DP frame rates (Statue instead of Neptune)
@@ -94,13 +101,8 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                 rows.append(guarded(lambda m=model, v=variant: _passes(results, SCENE[m], v), f"000 Table 3, {model}",
                                     f"{method} geometry passes", passes[i],
                                     "our passes follow the look-alike's depth complexity (nested shells)"))
-    for a, b in RATIOS:
-        for i, model in enumerate(MODELS):
-            paper = TABLE_3[a][0][i] / TABLE_3[b][0][i]
-            rows.append(guarded(lambda m=model, a=a, b=b: _fps(results, SCENE[m], VARIANT[a])
-                                / _fps(results, SCENE[m], VARIANT[b]),
-                                f"000 Table 3, {model}", f"{a} / {b} frame rate", round(paper, 2),
-                                "[derived] the ratio section 5 argues from", "x"))
+    modelled = {m: VARIANT[m] for m in TABLE_3 if VARIANT[m]}
+    rows += _pairs(results, "000 Table 3", MODELS, SCENE, {m: TABLE_3[m][0] for m in modelled}, modelled, RATIOS)
     for method, (_, _, mb) in TABLE_3.items():
         variant = VARIANT[method]
         if variant is None:
@@ -122,8 +124,30 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                 if model == "Statue" else f"the {TRIANGLES[model]}-triangle look-alike"
             rows.append(guarded(lambda m=model, v=variant: _fps(results, CUDP_SCENE[m], v), f"001 Table 1, {model}",
                                 f"{method} frame rate (fps)", rates[i], note))
+    rows += _pairs(results, "001 Table 1", CUDP_MODELS, CUDP_SCENE, {m: r for m, (r, _) in TABLE_1_001.items()},
+                   {m: v for m, (_, v) in TABLE_1_001.items()}, RATIOS_001)
     return Comparison("Seeds 000 and 001: FreePipe (Liu et al. 2010) and single-pass depth peeling via CUDA",
                       rows, [], _summary(results))
+
+
+def _pairs(results: pd.DataFrame, table: str, models, scenes: dict[str, str], rates: dict[str, tuple],
+           variants: dict[str, str], argued) -> list[PaperRow]:
+    """Every pair of the modelled methods on every model, marked within or outside 1.5x of the paper's ratio;
+    each model's order of the methods by frame rate; and a summary row of each."""
+    pairs, orders = [], []
+    for i, model in enumerate(models):
+        def fps_of(method: str, scene: str = scenes[model]) -> float:
+            return _fps(results, scene, variants[method])
+        for a, b in combinations(rates, 2):
+            a, b = (b, a) if (b, a) in argued else (a, b)
+            note = "[derived] a ratio the paper argues from" if (a, b) in argued else "[derived] same model"
+            pairs.append(mark(guarded(lambda a=a, b=b, f=fps_of: f(a) / f(b), f"{table}, {model}",
+                                      f"{a} / {b} frame rate", rates[a][i] / rates[b][i], note, "x"), WITHIN_1_5X))
+        orders.append(order_row(f"{table}, {model}", "modelled methods by frame rate, fastest first",
+                                sorted(rates, key=lambda m: -rates[m][i]), fps_of))
+    return [*pairs, summary_row(table, f"pairs of modelled methods {WITHIN_1_5X} of the paper's ratio", pairs,
+                                PAIRS_TARGET),
+            *orders, summary_row(table, "models whose order of the methods is the paper's", orders)]
 
 
 def _summary(results: pd.DataFrame) -> str:
