@@ -51,6 +51,10 @@ scoreboard  fragment dispatch through the scoreboard (k-buffer proposal 1,
             operation completes; no memory traffic (``bytes`` 0)
 =========== ====================================================================
 
+ALU work between operations (a register sort, compositing) is a ``compute``
+group (:meth:`OpPlan.compute`): each thread's instruction count, timed on the
+SM and left out of access counts and the OpStream.
+
 A pass marked ``software`` runs as a compute kernel (FreePipe's software
 pipeline); the timing model may then map one thread to each triangle.
 """
@@ -67,6 +71,7 @@ from gpusim.errors import GpusimError
 
 OPS = ("load", "store", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
        "rmw_read", "rmw_write", "blend", "depth_test", "stencil", "program_blend", "scoreboard")
+COMPUTE_OP = "compute"     # a group of ALU work, no memory operation (OpPlan.compute)
 PASS_KINDS = ("clear", "geometry", "fullscreen", "flush", "buffer")
 THREAD_KINDS = ("fragment", "pixel", "entry", "none")
 BASE_ALIGN = 4096          # bytes
@@ -107,6 +112,11 @@ class OpGroup:
     dep: bool
     pass_fn: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None   # pass of each op (i, seq)
     seq_pass: np.ndarray | None = None    # pass of a thread's op ``seq``, the same for every thread (ascending)
+    instructions: np.ndarray | None = None   # a ``compute`` group: each thread's ALU instructions
+
+    @property
+    def is_compute(self) -> bool:
+        return self.op == COMPUTE_OP
 
     @property
     def total(self) -> int:
@@ -193,8 +203,32 @@ class OpPlan:
             self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep, pass_fn,
                                        seq_pass))
 
+    def compute(self, pass_index, thread, instructions, dep: bool = True) -> None:
+        """Append ALU work in program order: thread ``thread[i]`` runs ``instructions[i]`` instructions (a
+        register sort, compositing). ``dep``: the work uses the result of the thread's previous operation (it
+        waits for it). No memory operation: access counts and the OpStream leave it out; the timing model
+        issues it on the SM (a warp runs as long as its busiest lane)."""
+        if isinstance(thread, (int, np.integer)):
+            thread = ThreadRange(int(thread))
+        else:
+            thread = np.asarray(thread, dtype=np.int64)
+        n = len(thread)
+        instructions = np.broadcast_to(np.asarray(instructions, dtype=np.int64), (n,))
+        if n and int(instructions.min()) < 0:
+            raise ValueError("instructions must be >= 0")
+        if not np.isscalar(pass_index):
+            pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), (n,))
+        if n and int(instructions.max()) > 0:
+            self.groups.append(OpGroup(pass_index, COMPUTE_OP, "", thread, np.ones(n, np.int64),
+                                       lambda i, s: np.zeros(len(i), np.int64), 0, dep, instructions=instructions))
+
+    @property
+    def memory_groups(self) -> list[OpGroup]:
+        """The groups of memory operations (every group but ALU work)."""
+        return [g for g in self.groups if not g.is_compute]
+
     def total_ops(self) -> int:
-        return sum(g.total for g in self.groups)
+        return sum(g.total for g in self.memory_groups)
 
     def accesses(self, kinds: set[str] | None = None) -> dict[str, dict[str, int]]:
         """Operation counts per structure and operation (no expansion).
@@ -204,7 +238,7 @@ class OpPlan:
         its ``pass_index``; the passes it spans share that kind).
         """
         out: dict[str, dict[str, int]] = {}
-        for g in self.groups:
+        for g in self.memory_groups:
             if kinds is not None and not self._kinds_of(g) <= kinds:
                 if self._kinds_of(g) & kinds:
                     raise ValueError("a group spans passes of several kinds; count it by expansion")
@@ -228,7 +262,7 @@ class OpPlan:
                               f"over the limit of {max_ops:,}; use a smaller trace")
         cols: dict[str, list] = {k: [] for k in ("pass_index", "thread", "op", "structure", "address",
                                                   "bytes", "dep")}
-        for g in self.groups:
+        for g in self.memory_groups:
             n = g.total
             i, seq = g.expand_ops()
             offset = np.asarray(g.offset(i, seq), dtype=np.uint64)

@@ -16,7 +16,7 @@ SIMPLE = ["core.sms=1", "core.lanes_per_sm=32", "core.instructions_per_op=0", "c
           "memory.partitions=1", "memory.interconnect_latency=0", "coalescer.segment_bytes=32",
           "dram.latency=100", "dram.bytes_per_cycle=32.0", "atomic.latency=50", "atomic.ops_per_cycle=100.0",
           "atomic.same_address_cycles=10", "rop.units=1", "rop.latency=0", "rop.ops_per_cycle=1.0",
-          "runner.no_progress_cycles=100000"]
+          "runner.no_progress_cycles=100000", "driver.pass_us=0"]
 
 
 def simulate(plan: OpPlan, sizes: dict, threads: int, extra=(), width=64):
@@ -269,15 +269,23 @@ def test_program_view_is_typed_instructions():
     # FreePipe's mapping: one thread per triangle, set up in software, looping over its fragments
     plan = OpPlan([Pass("draw", "geometry", "fragment", software=True)], ["a"])
     plan.add(0, "store", "a", 4, 1, lambda i, s: i * 4, 4)
-    gpu = load_gpu("gtx280", SIMPLE + ["raster.setup_instructions=10"])
-    work = Workload(plan, layout_bases(plan.structures, {"a": 16}), 64, 64, np.zeros(4, np.int64),
-                    np.array([0, 0, 1, 1]), triangles=2)
+    gpu = load_gpu("gtx280", SIMPLE + ["raster.setup_instructions=10", "raster.pixel_instructions=3",
+                                       "raster.vertex_bytes=16"])
+    # triangle 0 covers pixels 0 and 65 (a 2x2 bounding box), triangle 1 pixel 1; triangle 2 covers none
+    work = Workload(plan, layout_bases(plan.structures, {"a": 16}), 64, 64, np.array([0, 65, 1, 1]),
+                    np.array([0, 0, 1, 1]), triangles=3)
     prog = lower(work, gpu)
     from gpusim.hw.program import Compute, MemoryOp
     got = prog.warp(0)
-    assert got[0] == Compute(10)
-    assert [type(i) for i in got[1:]] == [MemoryOp, MemoryOp]
-    assert [(i.op, i.unit, i.lanes, list(i.thread)) for i in got[1:]] == [("store", "coalescer", 2, [0, 2]),
+    # every submitted triangle is a thread: it loads its 3 vertices, then sets up and scans its bounding box
+    # (the warp lasts as long as its largest box: 4 pixels)
+    index, vertices = got[:2]
+    assert (index.op, index.lanes, list(index.thread), list(index.nbytes), index.depends) == (
+        "load", 3, [0, 1, 2], [16] * 3, False)
+    assert (vertices.op, vertices.lanes, list(vertices.nbytes), vertices.depends) == ("load", 3, [48] * 3, True)
+    assert got[2] == Compute(10 + 3 * 4)
+    assert [type(i) for i in got[3:]] == [MemoryOp, MemoryOp]
+    assert [(i.op, i.unit, i.lanes, list(i.thread)) for i in got[3:]] == [("store", "coalescer", 2, [0, 2]),
                                                                            ("store", "coalescer", 2, [1, 3])]
 
 

@@ -6,7 +6,8 @@ O(threads) where the event model costs O(operations). Per pass it takes the
 largest of
 
 * issue: warp instructions (per warp, the most operations any of its lanes
-  issues in the group, so divergence counts) x issue cycles, over the SMs;
+  issues in the group, so divergence counts) x issue cycles, plus ALU work
+  (compute groups: the busiest lane's instructions per warp), over the SMs;
 * latency: each lane's dependent chain (an operation that waits for a result
   adds that unit's round trip), the slowest warp, or the SM's warps' chains
   divided by the resident warps that hide each other;
@@ -16,10 +17,14 @@ largest of
 * atomic: operations over all atomic units, and the hottest address
   (operations on one word serialize at ``same_address_cycles``);
 * rop: ROP service cycles of the busiest unit;
-* raster: every triangle through the fixed-function rasterizer (graphics
-  pipeline geometry passes), or software setup on the SMs (triangle mapping);
+* raster: every triangle through the fixed-function front end's slowest
+  stage, or its quads through the rasterizer (graphics-pipeline geometry
+  passes, whose issue bound counts the helper lanes of 2x2 quads); a software
+  rasterizer's vertex loads, setup and bounding-box scan on the SMs (triangle
+  mapping, in the issue and dram bounds);
 
-plus one round trip of the slowest unit the pass uses. Imbalance across
+plus one round trip of the slowest unit the pass uses and the driver's
+``driver.pass_us``. Imbalance across
 partitions beyond the hottest address, queueing and L2 hits are not modelled
 (the L2, when present, is assumed to catch re-use: DRAM bytes are those of the
 first touch). These are estimates: ``gpusim`` reports them beside the full
@@ -31,13 +36,20 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.hw.core import SimtCore, flush_cycles
+from gpusim.hw.driver import pass_overhead_cycles
 from gpusim.hw.lower import PRODUCES, split_by, submitted_triangles, thread_mapping
 from gpusim.hw.memory import SECTOR
+from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, per_triangle_cycles, quad_ids
 from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
 
 # the units an operation goes to from the core (analytic estimates report memory traffic as DRAM's)
 MEM, ATOMIC, ROP, SCOREBOARD = "coalescer", "atomic", "rop", "scoreboard"
+
+
+def distinct_quads(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> int:
+    """How many 2x2 quads the fragments (triangle ``prim``, ``pixel``) fill."""
+    return len(np.unique(quad_ids(prim, pixel, width, height)))
 
 
 def _distinct(a: np.ndarray) -> int:
@@ -112,6 +124,7 @@ def analytic_timing(result, work, gpu) -> dict:
     segment = gpu.coalescer.segment_bytes
     n_pass = len(plan.passes)
     wis = np.zeros(n_pass)
+    alu = np.zeros(n_pass)                    # issue cycles of ALU work (compute groups)
     dram_bytes = np.zeros(n_pass)
     atomic_ops = np.zeros(n_pass)
     hottest = np.zeros(n_pass)
@@ -124,14 +137,16 @@ def analytic_timing(result, work, gpu) -> dict:
         for p in where:
             groups_of_pass[p].append(gi)
     passes, total = [], 0
+    overhead = pass_overhead_cycles(gpu)      # the driver issues each pass
     for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
         if pk.kind == "flush":
-            cyc = flush_cycles(c, -(-work.width * work.height // ws))
+            cyc = flush_cycles(c, -(-work.width * work.height // ws)) + overhead
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": 0, "bound": "flush"})
             total += cyc
             continue
         last_producer, waited = None, False
         chain = None                          # (first lane key, dependent-chain cycles per lane key from it)
+        pass_keys: list = []                  # the lane keys of each group in the pass
         lane_cache: list = []                 # [(threads, (lanes, first key, keys, threads per lane, present,
                                               #             warp max))]
         for gi in groups_of_pass[p]:          # in program order
@@ -142,11 +157,15 @@ def analytic_timing(result, work, gpu) -> dict:
                 sel = sel()
             n = len(g.thread)
             thread = g.thread_ids()
-            cls, produces = entry_unit(g.op), g.op in PRODUCES
+            compute = g.is_compute
+            cls, produces = (None, False) if compute else (entry_unit(g.op), g.op in PRODUCES)
             nb = g.bytes if not callable(g.bytes) else None
             lanes_sel, counts = (li, cnt) if sel is None else (li[sel], cnt[sel])
             lanes = thread if sel is None else thread[lanes_sel]
-            used[p].add(cls)
+            if compute:                       # ALU work: its instructions stand for the operation count
+                counts = np.asarray(g.instructions)[lanes_sel]
+            else:
+                used[p].add(cls)
             # per lane: the group's threads it runs (several fragments of one triangle); groups of one pass on
             # the same threads (a thread's successive operations) share it
             cached = lane_cache if sel is None else []
@@ -161,19 +180,24 @@ def analytic_timing(result, work, gpu) -> dict:
                 got = (lanes, lo, size, threads_in, present, _warp_max(threads_in[present], ws).sum())
                 cached.append((thread, got))
             lanes, lo, size, threads_in, present, warp_threads = got
+            pass_keys.append(lo + present)
             c0 = int(counts[0]) if len(counts) else 0
             uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
             per_lane = threads_in * c0 if uniform else np.bincount(lanes - lo, weights=counts, minlength=size)
             # warp instructions: lanes in order, each warp issues its busiest lane's count
-            wis[p] += warp_threads * c0 if uniform else _warp_max(per_lane[present], ws).sum()
+            busiest = warp_threads * c0 if uniform else _warp_max(per_lane[present], ws).sum()
+            if compute:
+                alu[p] += busiest * c.issue_cycles
+            else:
+                wis[p] += busiest
             ops = float(counts.sum())
             # first operation of each thread: coalescing (on a spread sample of warps) and the hottest address
             # threads with no operation in this group have no address (a list walk of zero nodes)
             live = None if not len(counts) or int(counts.min()) > 0 else counts > 0
             lanes_live = lanes_sel if live is None else lanes_sel[live]
             counts_live = counts if live is None else counts[live]
-            if not len(lanes_live):
-                pass                             # no thread issues this group in this pass
+            if not len(lanes_live) or compute:
+                pass                             # no thread issues this group in this pass, or no memory
             elif cls == MEM:
                 sample = _warp_sample(lanes_live, ws)
                 zero = np.broadcast_to(np.zeros(1, np.int64), sample.shape)
@@ -188,7 +212,7 @@ def analytic_timing(result, work, gpu) -> dict:
             else:
                 zero = np.broadcast_to(np.zeros(1, np.int64), lanes_live.shape)
                 addr = bases[g.structure] + np.asarray(g.offset(lanes_live, zero), np.int64)
-            if not len(lanes_live):
+            if not len(lanes_live) or compute:
                 pass
             elif cls == ATOMIC:
                 atomic_ops[p] += ops
@@ -200,7 +224,7 @@ def analytic_timing(result, work, gpu) -> dict:
                 rop_unit[p] += np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
             # dependent chains per lane: every operation issues; a dependent producer waits for each result,
             # and the first dependent operation after a producer waits once per thread
-            add = per_lane * cost
+            add = per_lane * (c.issue_cycles if compute else cost)
             lp = last_producer
             if g.dep and produces:
                 add += per_lane * lat[cls]
@@ -219,7 +243,8 @@ def analytic_timing(result, work, gpu) -> dict:
             elif g.dep:
                 waited = True
         if chain is None:
-            passes.append({"name": pk.name, "kind": pk.kind, "cycles": 0, "warps": 0, "bound": "empty"})
+            passes.append({"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"})
+            total += overhead
             continue
         lane_chain = chain[1]
         lane_chain = lane_chain[lane_chain > 0]       # every lane issues, so a present lane has a chain
@@ -229,7 +254,7 @@ def analytic_timing(result, work, gpu) -> dict:
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
         n_sm = np.bincount(sm, minlength=c.sms)
         bounds = {
-            "issue": float(np.ceil(wis[p] / min(c.sms, n_warps)) * cost),
+            "issue": float(np.ceil(wis[p] / min(c.sms, n_warps)) * cost + alu[p] / min(c.sms, n_warps)),
             "latency": float(max(wchain.max(), (per_sm / np.maximum(1, np.minimum(n_sm, c.warps_per_sm))).max())),
             "dram": dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions),
             "atomic": atomic_ops[p] / (gpu.atomic.ops_per_cycle * m.partitions),
@@ -237,12 +262,28 @@ def analytic_timing(result, work, gpu) -> dict:
             "rop": float(rop_unit[p].max()),
         }
         mapping = thread_mapping(gpu, pk)
-        if mapping == "fragment":          # the fixed-function rasterizer sees every triangle
-            bounds["raster"] = submitted_triangles(pk, work) / gpu.raster.triangles_per_cycle
-        elif mapping == "triangle":        # software setup on the SMs
-            bounds["issue"] += np.ceil(n_warps / min(c.sms, n_warps)) * gpu.raster.setup_instructions * c.issue_cycles
+        keys = np.unique(np.concatenate(pass_keys)) if pass_keys else np.zeros(0, np.int64)
+        if mapping == "fragment" and len(keys):
+            # the front end sees every triangle; the pixel shader runs 4 lanes per 2x2 quad (helper lanes)
+            quads = distinct_quads(work.frag_prim[keys], work.frag_pixel[keys], work.width, work.height)
+            bounds["issue"] *= max(1.0, 4 * quads / len(keys))
+            bounds["raster"] = max(submitted_triangles(pk, work) * per_triangle_cycles(gpu),
+                                   quads / gpu.raster.quads_per_cycle)
+        elif mapping == "triangle":
+            # software rasterizer: a thread per submitted triangle loads its vertices, sets up and scans its
+            # bounding box; a warp lasts as long as its largest box
+            tris = submitted_triangles(pk, work) if pk.primitives is None else int(keys.max()) + 1
+            frags = np.unique(np.concatenate([g.thread_ids() for g in (plan.groups[i] for i in groups_of_pass[p])]))
+            r = gpu.raster
+            box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
+            setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * c.issue_cycles
+            sw_warps = -(-tris // ws)
+            bounds["issue"] += (setup + 2 * sw_warps * cost) / min(c.sms, sw_warps)
+            dram_bytes[p] += tris * (INDEX_BYTES + 3 * r.vertex_bytes)
+            bounds["dram"] = dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions)
+            used[p].add(MEM)
         limit = max(bounds, key=bounds.get)
-        cyc = int(np.ceil(bounds[limit])) + max(lat[u] for u in used[p])
+        cyc = int(np.ceil(bounds[limit])) + max(lat[u] for u in used[p]) + overhead
         passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": n_warps, "bound": limit})
         total += cyc
     units_built = [name for name, cls in (("dram", MEM), ("atomic", ATOMIC), ("rop", ROP), ("scoreboard", SCOREBOARD))

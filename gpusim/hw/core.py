@@ -145,6 +145,9 @@ class SimtCore(Unit):
             lo = wi_start[w]
             for wi, (u, dep, produces, cyc) in enumerate(instructions[lo:wi_start[w + 1]], lo):
                 if u == COMPUTE:                     # ALU work: holds the port, the next instruction waits
+                    if dep and value > now:          # it works on a loaded value: wait for it
+                        yield timeout(value - now)
+                        now = value
                     f = sm_free[sm]
                     sm_free[sm] = (f if f > now else now) + cyc
                     continue

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 # importing the unit modules registers them and their config sections, in this order
-from gpusim.hw import core, raster, memory, atomic, rop, blender, scoreboard  # noqa: F401
+from gpusim.hw import core, raster, memory, atomic, rop, blender, scoreboard, driver  # noqa: F401
 from gpusim.config import build, build_overridden, load_toml, param, to_dict
 from gpusim.errors import ConfigError
 from gpusim.hw.memory import MemoryLevel

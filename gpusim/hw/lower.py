@@ -32,6 +32,7 @@ import numpy as np
 
 from gpusim.errors import GpusimError
 from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
+from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, quad_ids
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, mod
 from gpusim.metrics.composite import run_starts
@@ -42,6 +43,8 @@ from gpusim.schemes.common.arrays import rank_in_runs
 PRODUCES = frozenset({"load", "rmw_read", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
                       "depth_test", "stencil", "scoreboard"})
 OP_PRODUCES = np.array([o in PRODUCES for o in OPS])
+#: byte addresses of the software rasterizer's index and vertex buffers (above every scheme structure)
+INDEX_BASE, VERTEX_BASE = 1 << 40, 1 << 41
 
 
 class Workload:
@@ -87,11 +90,19 @@ class Workload:
             return lambda: values() if order is None else values()[order]
 
         return cls(result.plan, result.bases(), trace.width, trace.height, pick(trace.pixel_ids),
-                   pick(lambda: trace.prim), int(trace.prim.max()) + 1 if len(trace) else 0)
+                   pick(lambda: trace.prim), scene_triangles(trace))
 
     @property
     def operations(self) -> int:
         return self.plan.total_ops()
+
+
+def scene_triangles(trace) -> int:
+    """Triangles the scene submits: the trace's ``primitives`` metadata (the rasterizer's count, triangles that
+    cover no pixel included) when it has one that covers its primitive ids, else the highest id + 1."""
+    seen = int(trace.prim.max()) + 1 if len(trace) else 0
+    meta = trace.meta.get("primitives")
+    return max(seen, int(meta)) if isinstance(meta, (int, np.integer)) and not isinstance(meta, bool) else seen
 
 
 def thread_mapping(gpu, p) -> str:
@@ -114,12 +125,19 @@ class _Piece:
     k: np.ndarray | None           # iteration in the group's loop (None: all 0)
     address: np.ndarray
     nbytes: np.ndarray | int
+    instructions: np.ndarray | None = None     # a compute group's ALU instructions per row (None: memory)
 
     def take(self, idx: np.ndarray) -> "_Piece":
         """The rows ``idx`` of this piece (in that order)."""
         return _Piece(self.group, self.pass_index, self.thread[idx],
                       None if self.k is None else self.k[idx], self.address[idx],
-                      self.nbytes if np.isscalar(self.nbytes) else self.nbytes[idx])
+                      self.nbytes if np.isscalar(self.nbytes) else self.nbytes[idx],
+                      None if self.instructions is None else self.instructions[idx])
+
+    @property
+    def operations(self) -> int:
+        """Memory operations of the piece (ALU work has none)."""
+        return 0 if self.instructions is not None else len(self.thread)
 
 
 def split_by(values: np.ndarray) -> list[tuple[int, np.ndarray]]:
@@ -140,18 +158,20 @@ def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
     threads = g.thread_ids()
     i, seq = g.expand_ops()
     single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
-    addr = np.asarray(g.offset(i, seq), np.int64) + bases[g.structure]
+    instr = np.asarray(g.instructions)[i] if g.is_compute else None
+    addr = np.asarray(g.offset(i, seq), np.int64) + (0 if g.is_compute else bases[g.structure])
     nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
     pass_of = g.pass_of(i, seq)
     if np.isscalar(pass_of):
-        return [_Piece(gi, int(pass_of), threads if single else threads[i], None if single else seq, addr, nbytes)]
+        return [_Piece(gi, int(pass_of), threads if single else threads[i], None if single else seq, addr, nbytes,
+                       instr)]
     pieces = []
     for p, sel in split_by(np.asarray(pass_of, np.int64)):
         ii = i[sel]
         # iteration inside this pass: position among the thread's operations of the group in the pass
         k = rank_in_runs(ii)
         pieces.append(_Piece(gi, int(p), threads[ii], k if k.any() else None, addr[sel],
-                             nbytes if np.isscalar(nbytes) else nbytes[sel]))
+                             nbytes if np.isscalar(nbytes) else nbytes[sel], None if instr is None else instr[sel]))
     return pieces
 
 
@@ -179,12 +199,12 @@ def lower(work: Workload, gpu, keep=None) -> Program:
     pieces = [pc for gi, g in enumerate(plan.groups) for pc in _group_pieces(gi, g, work.bases)]
     totals = np.zeros(n_pass, np.int64)
     for pc in pieces:
-        totals[pc.pass_index] += len(pc.thread)
+        totals[pc.pass_index] += pc.operations
     if keep is not None:
         masks = [keep(pc.pass_index, pc.thread) for pc in pieces]
         kept = np.zeros(n_pass, np.int64)
         for pc, m in zip(pieces, masks):
-            kept[pc.pass_index] += int(m.sum())
+            kept[pc.pass_index] += int(m.sum()) if pc.instructions is None else 0
         whole = (kept == 0) & (totals > 0)
         for j, (pc, m) in enumerate(zip(pieces, masks)):
             if not whole[pc.pass_index] and not m.all():
@@ -194,15 +214,16 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         if len(pc.thread):
             by_pass[pc.pass_index].append(pc)
 
-    units = tuple(dict.fromkeys(entry_unit(g.op) for g in plan.groups))
+    units = tuple(dict.fromkeys(entry_unit(g.op) for g in plan.memory_groups))
     passes, inst = [], []
     rows: dict[str, list] = {}         # unit -> row arrays of its pieces
     row_at: dict[str, int] = {}
-    setup_warps = []                   # warps that start with triangle setup (a Compute instruction)
+    software = []                      # software-rasterizer passes: (pass, warps, setup cycles per warp,
+                                       # triangle per lane)
     warp0 = 0
     for p, pk in enumerate(plan.passes):
         mode, ps = modes[p], by_pass[p]
-        ops = sum(len(pc.thread) for pc in ps)
+        ops = sum(pc.operations for pc in ps)
         if not ps:
             flush = -(-work.width * work.height // ws) if pk.kind == "flush" else 0
             passes.append(PassProgram(p, pk.name, pk.kind, np.zeros(1, np.int64), 0, warp0, flush,
@@ -212,20 +233,39 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         keys = [work.frag_prim[pc.thread] if mode == "triangle" else pc.thread for pc in ps]
         key_lo = min(int(k.min()) for k in keys)         # keys of one pass span part of the range (a batch)
         universe = max(int(k.max()) for k in keys) + 1 - key_lo
+        if mode == "triangle" and pk.primitives is None:
+            # a software pipeline runs a thread per submitted triangle, those that cover no pixel included
+            # (a sample keeps its share of those)
+            key_lo, universe = 0, max(universe + key_lo, work.triangles)
         present = np.zeros(universe, bool)
         for k in keys:
             present[k - key_lo] = True
+        if mode == "triangle" and pk.primitives is None:
+            if keep is None:
+                present[:] = True
+            else:
+                share = ops / max(1, int(totals[p]))
+                present |= _hashed(np.arange(universe), share)
         lane_keys = np.flatnonzero(present) + key_lo
         n_lanes = len(lane_keys)
         # each key's lane rank (None: the key is its rank)
         rank_of = None if n_lanes == universe and not key_lo else np.cumsum(present) - 1
+        quads = None
         if any(plan.groups[pc.group].op == "scoreboard" for pc in ps):
             pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
             warp_of_lane = _scoreboard_warps(pix, work.width, gpu)
+        elif mode == "fragment":
+            # the rasterizer emits 2x2 quads: 4 shader lanes per quad, helper lanes of partial quads included
+            quads = _quads_so_far(work, lane_keys)
+            n_warps = min(n_lanes, max(1, -(-4 * int(quads[-1]) // ws)))
+            warp_of_lane = np.arange(n_lanes, dtype=np.int64) * n_warps // n_lanes
+        else:
+            warp_of_lane = None                          # lanes fill warps in order: rank // ws, rank % ws
+        if warp_of_lane is not None:
             first_lane = np.searchsorted(warp_of_lane, np.arange(int(warp_of_lane[-1]) + 1))
             lane_in_warp = np.arange(n_lanes) - first_lane[warp_of_lane]
         else:
-            warp_of_lane = lane_in_warp = None           # lanes fill warps in order: rank // ws, rank % ws
+            lane_in_warp = None
         n_warps = int(warp_of_lane[-1]) + 1 if warp_of_lane is not None else -(-n_lanes // ws)
         # triangle mapping: iteration j of a lane's loop is its triangle's j-th fragment (in thread order)
         j_of = None
@@ -235,6 +275,12 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                 frag_present[pc.thread] = True
             fr = np.flatnonzero(frag_present)
             prim = work.frag_prim[fr]
+            # each warp: load its triangles' vertices, then set up and scan the largest bounding box among them
+            bbox = bbox_pixels(prim - key_lo, work.frag_pixel[fr], work.width, universe)[lane_keys - key_lo]
+            r = gpu.raster
+            setup_cycles = (r.setup_instructions + r.pixel_instructions
+                            * np.maximum.reduceat(bbox, np.arange(0, n_lanes, ws))) * gpu.core.issue_cycles
+            software.append((p, np.arange(warp0, warp0 + n_warps), setup_cycles, lane_keys))
             order = np.argsort(prim, kind="stable")
             sp = prim[order]
             rank = np.empty(len(fr), np.int64)
@@ -255,50 +301,83 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                 pc = pc.take(order)
             k = pc.k
             n = len(w)
-            op = OPS.index(plan.groups[pc.group].op)
-            unit = entry_unit(OPS[op])
+            columns = (w[start] + warp0, j[start] if j is not None else np.zeros(len(start), np.int64),
+                       np.full(len(start), pc.group, np.int64),
+                       k[start] if k is not None else np.zeros(len(start), np.int64))
+            if pc.instructions is not None:      # ALU work: the instruction's busiest lane decides its cycles
+                busiest = np.maximum.reduceat(pc.instructions, start) * gpu.core.issue_cycles
+                inst.append((*columns, np.zeros(len(start), np.int64), np.zeros(len(start), np.int64),
+                             np.full(len(start), p, np.int64), busiest))
+                continue
+            unit = entry_unit(plan.groups[pc.group].op)
             at = row_at.get(unit, 0)
-            inst.append((w[start] + warp0, j[start] if j is not None else np.zeros(len(start), np.int64),
-                         np.full(len(start), pc.group, np.int64),
-                         k[start] if k is not None else np.zeros(len(start), np.int64),
-                         start + at, np.append(start[1:], n) + at, np.full(len(start), p, np.int64)))
-            rows.setdefault(unit, []).append((op, pc.address, pc.nbytes, pc.thread))
+            inst.append((*columns, start + at, np.append(start[1:], n) + at, np.full(len(start), p, np.int64),
+                         np.full(len(start), gpu.core.op_issue_cycles, np.int64)))
+            rows.setdefault(unit, []).append((OPS.index(plan.groups[pc.group].op), pc.address, pc.nbytes, pc.thread))
             row_at[unit] = at + n
         pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, warp0, operations=ops, operations_total=int(totals[p]))
-        if mode == "fragment":           # the fixed-function rasterizer feeds the warps in triangle order
+        if mode == "fragment":           # the front end feeds the warps in triangle order
             first_lane = (np.arange(0, n_lanes, ws) if warp_of_lane is None
                           else np.searchsorted(warp_of_lane, np.arange(n_warps)))
             pp.triangles, position = _raster_positions(work, pk, lane_keys)
             pp.warp_triangles = np.maximum.reduceat(position, first_lane)
-        elif mode == "triangle":
-            setup_warps.append(np.arange(warp0, warp0 + n_warps))
+            if quads is None:
+                quads = _quads_so_far(work, lane_keys)
+            pp.quads = int(quads[-1])
+            pp.warp_quads = np.maximum.reduceat(quads, first_lane)
         pp.wi_start = np.arange(n_warps + 1) + warp0       # global warp numbers; made instruction offsets below
         passes.append(pp)
         warp0 += n_warps
     if inst:
-        w, j, g, k, lo, hi, pa = (np.concatenate(c) for c in zip(*inst))
+        w, j, g, k, lo, hi, pa, wi_cycles = (np.concatenate(c) for c in zip(*inst))
         order = np.lexsort((k, g, j, w))
-        w, g, k, lo, hi, pa = w[order], g[order], k[order], lo[order], hi[order], pa[order]
+        w, g, k, lo, hi, pa, wi_cycles = (a[order] for a in (w, g, k, lo, hi, pa, wi_cycles))
     else:
-        w = g = k = lo = hi = pa = np.zeros(0, np.int64)
-    op_of_group = np.array([OPS.index(gr.op) for gr in plan.groups] or [0], np.int64)
-    unit_of_group = np.array([units.index(entry_unit(gr.op)) for gr in plan.groups] or [0], np.int64)
+        w = g = k = lo = hi = pa = wi_cycles = np.zeros(0, np.int64)
+    op_of_group = np.array([-1 if gr.is_compute else OPS.index(gr.op) for gr in plan.groups] or [0], np.int64)
+    unit_of_group = np.array([COMPUTE if gr.is_compute else units.index(entry_unit(gr.op)) for gr in plan.groups]
+                             or [0], np.int64)
     dep_of_group = np.array([gr.dep for gr in plan.groups] or [False], bool)
     wi_op, wi_unit, wi_dep = op_of_group[g], unit_of_group[g], dep_of_group[g]
-    wi_cycles = np.full(len(g), gpu.core.issue_cycles * (1 + gpu.core.instructions_per_op), np.int64)
-    if setup_warps:                  # each warp of a triangle-mapped pass first sets up its triangles
-        sw = np.concatenate(setup_warps)
-        at = np.searchsorted(w, sw)
-        pass_of_warp = pa[at]
-        cols = [(w, sw), (g, -1), (k, 0), (lo, 0), (hi, 0), (pa, pass_of_warp), (wi_op, -1), (wi_unit, COMPUTE),
-                (wi_dep, False), (wi_cycles, gpu.raster.setup_instructions * gpu.core.issue_cycles)]
-        w, g, k, lo, hi, pa, wi_op, wi_unit, wi_dep, wi_cycles = (np.insert(col, at, v) for col, v in cols)
+    if software:                     # each warp of a software-rasterizer pass first loads and sets up its triangles
+        if "coalescer" not in units:
+            units += ("coalescer",)
+        mem, vb = units.index("coalescer"), 3 * gpu.raster.vertex_bytes
+        sw = np.concatenate([s[1] for s in software])
+        pass_of_warp = np.concatenate([np.full(len(s[1]), s[0]) for s in software])
+        setup = np.concatenate([s[2] for s in software])
+        # inserted before each warp's first instruction, last first: the index load, the vertex load (it needs
+        # the indices), then setup (it needs the vertices)
+        prefix = [(-1, 0, 0, 0, -1, COMPUTE, True, setup)]
+        for base, nb, dep in ((VERTEX_BASE, vb, True), (INDEX_BASE, INDEX_BYTES, False)):
+            at = row_at.get("coalescer", 0)
+            load_lo, load_hi = [], []
+            for _, warps, _, tri in software:
+                rows.setdefault("coalescer", []).append((OPS.index("load"), base + tri * nb, nb, tri))
+                first = at + np.arange(len(warps)) * ws
+                load_lo.append(first)
+                load_hi.append(np.minimum(first + ws, at + len(tri)))
+                at += len(tri)
+            row_at["coalescer"] = at
+            prefix.append((-1, 0, np.concatenate(load_lo), np.concatenate(load_hi), OPS.index("load"), mem, dep,
+                           gpu.core.op_issue_cycles))
+        # per inserted instruction: warp, pass, group, k, row lo, row hi, op, unit, depends, issue cycles
+        for values in prefix:
+            at_w = np.searchsorted(w, sw)
+            w, pa, g, k, lo, hi, wi_op, wi_unit, wi_dep, wi_cycles = (
+                np.insert(col, at_w, v) for col, v in zip((w, pa, g, k, lo, hi, wi_op, wi_unit, wi_dep, wi_cycles),
+                                                          (sw, pass_of_warp, *values)))
     row_sets = {unit: Rows(parts) for unit, parts in rows.items()}
+    if keep is not None:
+        kept, total = sum(p.operations for p in passes), sum(p.operations_total for p in passes)
+        triangle_share = max(1, kept) / max(1, total)
+    else:
+        triangle_share = 1.0
     warp_wi_start = np.searchsorted(w, np.arange(warp0 + 1))
     for pp in passes:
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
     return Program(passes, units, lo, hi, wi_op, wi_unit, wi_cycles, wi_dep, (wi_op >= 0) & OP_PRODUCES[wi_op],
-                   w, pa, g, k, row_sets, work.frag_pixel)
+                   w, pa, g, k, row_sets, work.frag_pixel, triangle_share)
 
 
 class Placement(NamedTuple):
@@ -362,6 +441,20 @@ def _raster_positions(work: Workload, pk, lane_keys: np.ndarray) -> tuple[int, n
     rank[np.argsort(first)] = np.arange(1, len(first) + 1)
     distinct = max(1, len(first))
     return total, -(-rank[inverse] * max(total, distinct) // distinct)
+
+
+def _quads_so_far(work: Workload, lane_keys: np.ndarray) -> np.ndarray:
+    """Per lane (fragment, in submission order): the 2x2 quads the rasterizer has emitted by the time it emits
+    this lane's (a quad counts at its first fragment)."""
+    q = quad_ids(work.frag_prim[lane_keys], work.frag_pixel[lane_keys], work.width, work.height)
+    first = np.zeros(len(q), bool)
+    first[np.unique(q, return_index=True)[1]] = True
+    return np.cumsum(first)
+
+
+def _hashed(values: np.ndarray, share: float) -> np.ndarray:
+    """A deterministic pseudo-random ``share`` of ``values`` (a multiplicative hash below a threshold)."""
+    return ((values * 2654435761) & 0xFFFFFFFF) < int(share * 2**32)
 
 
 def submitted_triangles(pk, work: Workload) -> int:

@@ -5,8 +5,9 @@ only event queue) and the units built for the program: the SIMT cores always,
 every other registered unit only when the program issues an operation that
 reaches it (``Unit.needed``), the memory levels in ``memory.levels`` order.
 
-Passes are barriers: a pass ends when its last operation has completed and
-every unit is idle again (stores landed, the ROPs drained), so the next pass
+Each pass starts ``driver.pass_us`` after the one before it (the draw call or
+kernel launch: gpusim.hw.driver). Passes are barriers: a pass ends when its
+last operation has completed and every unit is idle again (stores landed, the ROPs drained), so the next pass
 starts on an idle machine and its cycles do not depend on when it starts. A
 ``flush`` pass (the k-buffer's batching heuristic) drains the pipeline
 (``core.pipeline_latency``) and runs a full-screen quad of ALU-only fragments.
@@ -26,6 +27,7 @@ import simpy
 
 from gpusim.errors import GpusimError
 from gpusim.hw import gpu as _gpu  # noqa: F401  (registers every unit)
+from gpusim.hw.driver import pass_overhead_cycles
 from gpusim.hw.memory import MemoryLevel
 from gpusim.hw.parallel import plan_shares, run_shares
 from gpusim.hw.program import Program
@@ -126,10 +128,12 @@ class Machine:
                 if hasattr(u, "only_passes"):
                     u.only_passes(indices)
         out = []
+        overhead = pass_overhead_cycles(self.gpu)
         for i in indices:
             p = self.program.passes[i]
             self.current_pass = i
             start = self.now
+            self._advance(start + overhead)          # the driver issues the pass
             if p.kind == "flush":
                 self._advance(start + self.core.flush_cycles(p.flush_warps))
             elif p.warps:

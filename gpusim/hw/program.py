@@ -71,7 +71,9 @@ class PassProgram:
     flush_warps: int = 0           # ALU-only warps of a flush pass (a full-screen quad, no memory ops)
     warp_triangles: np.ndarray | None = None   # fixed-function rasterizer: triangles rasterized before each
                                                # warp's fragments are all out (its last triangle + 1)
-    triangles: int = 0             # triangles the fixed-function rasterizer takes in the pass
+    triangles: int = 0             # triangles the fixed-function front end takes in the pass
+    warp_quads: np.ndarray | None = None       # 2x2 quads rasterized before each warp's fragments are all out
+    quads: int = 0                 # quads the fixed-function rasterizer emits in the pass
     operations: int = 0            # operations lowered (after any sampling)
     operations_total: int = 0      # operations of the pass in the plan
 
@@ -150,6 +152,7 @@ class Program:
     wi_k: np.ndarray               # its iteration inside the group's loop
     row_sets: dict[str, Rows]      # unit name -> its rows
     frag_pixel: np.ndarray = field(repr=False, default=None)   # pixel of each fragment thread
+    triangle_share: float = 1.0    # share of each pass's triangles a sampled program submits (1: all)
 
     @property
     def instructions(self) -> int:

@@ -1,13 +1,38 @@
-"""Primitive processing: the fixed-function rasterizer of the graphics pipeline.
+"""Primitive processing: the geometry front end of the graphics pipeline, and software rasterization.
 
-A geometry pass of the graphics pipeline gets its fragments from the
-rasterizer (``raster.triangles_per_cycle``): a warp starts once the triangles
-of its fragments are rasterized, and the pass lasts at least as long as
-rasterizing every triangle it submits (each depth-peeling pass pays the whole
-scene again; a batch of the k-buffer's heuristic only its own). A software
-rasterizer (the ``triangle`` thread mapping, FreePipe) instead runs in the
-threads: lowering gives each warp a Compute instruction of
-``raster.setup_instructions`` per triangle (gpusim.hw.lower).
+A geometry pass of the graphics pipeline gets its fragments from the front
+end, a pipeline of stages each with its own throughput:
+
+* vertex fetch: ``vertices_per_triangle`` shaded vertices per triangle (the
+  post-transform cache's average miss rate), ``vertex_bytes`` each, read at
+  the DRAM channels' bandwidth;
+* vertex shading: ``vertex_instructions`` per shaded vertex, on
+  ``vertex_lanes`` dedicated vertex lanes (G71 has separate vertex shaders), or
+  on all the SMs' lanes when ``vertex_lanes`` is 0 (a unified GPU);
+* primitive assembly and setup: ``triangles_per_cycle``;
+* rasterization in 2x2 quads: ``quads_per_cycle``. A quad that a triangle
+  covers only in part still fills four shader lanes (helper lanes), so a
+  pass's pixel-shader warps hold ``4 x quads`` lanes, not one per fragment.
+
+Stages overlap (buffers between them), so triangle ``i`` leaves the front end
+once every stage has done the work of triangles ``0..i``: the largest of the
+stages' cumulative times. A warp starts once its last fragment's triangle is
+out, and a pass lasts at least as long as its whole front end. Every pass of a
+multi-pass scheme submits the scene again and pays it again; a batch of the
+k-buffer's heuristic pays only its own triangles. Contention of vertex work
+with fragment work for the same SM lanes and DRAM channels is not modelled:
+each stage is timed at its own peak rate.
+
+A software rasterizer (the ``triangle`` thread mapping, FreePipe) runs in the
+threads instead, one thread per submitted triangle (triangles that cover no
+pixel included): each thread loads its triangle's indices (``INDEX_BYTES``,
+FreePipe's int4 texel), then its three vertices (``3 x vertex_bytes``, laid
+out per triangle: the texture cache's re-use of shared vertices is not
+modelled), runs
+``setup_instructions`` (transform, clipping, culling and edge setup), then
+tests every pixel of its triangle's bounding box (``pixel_instructions`` each)
+and issues its fragments' operations (gpusim.hw.lower). A warp lasts as long
+as its longest thread.
 """
 
 from __future__ import annotations
@@ -21,44 +46,107 @@ from gpusim.config import param
 from gpusim.hw.unit import FP, Unit, occupancy_stats, register_unit
 
 
+INDEX_BYTES = 16        # a software rasterizer's triangle indices: one int4 texel
+
+
 @dataclass(frozen=True)
 class RasterConfig:
-    """Primitive processing: the fixed-function rasterizer, or a software one in the threads."""
+    """The geometry front end (vertex fetch and shading, setup, quad rasterization) and the software
+    rasterizer's thread program."""
 
-    triangles_per_cycle: float = param(0.46, unit="triangles/cycle", doc="fixed-function setup and raster "
-                                       "rate: a graphics-pipeline geometry pass sends every triangle through "
-                                       "it, and a warp starts once its fragments' triangles are rasterized", gt=0)
-    setup_instructions: int = param(40, unit="instructions", doc="per-triangle setup a software-rasterizer "
-                                    "thread issues before its fragments (triangle thread mapping)", min=0)
+    triangles_per_cycle: float = param(0.46, unit="triangles/cycle", doc="primitive assembly and setup rate of "
+                                       "the fixed-function front end", gt=0)
+    quads_per_cycle: float = param(3.72, unit="quads/cycle", doc="2x2 pixel quads the fixed-function rasterizer "
+                                   "emits per cycle", gt=0)
+    vertices_per_triangle: float = param(1.0, unit="vertices/triangle", doc="vertices fetched and shaded per "
+                                         "triangle after the post-transform vertex cache (its average cache "
+                                         "miss ratio: 0.5 at best on a closed indexed mesh, about 0.6-0.7 in a "
+                                         "cache-optimised order, 3 without indices)", min=0, max=3)
+    vertex_bytes: int = param(16, unit="bytes", doc="attribute bytes fetched per vertex (a float4 position; a "
+                              "lit mesh adds its normal)", min=0, max=1024)
+    vertex_instructions: int = param(20, unit="instructions", doc="scalar instructions of the vertex program "
+                                     "(modelview-projection transform 16 and its output writes)", min=0)
+    vertex_lanes: int = param(0, unit="lanes", doc="scalar lanes of dedicated vertex shaders (0: a unified GPU, "
+                              "vertex shading runs on all the SMs' lanes)", min=0)
+    setup_instructions: int = param(240, unit="instructions", doc="software rasterizer, per triangle thread, "
+                                    "in single-precision issue slots: transform of 3 vertices, back-face test "
+                                    "(double precision in FreePipe, at the GPU's DP rate), clipping, edge setup", min=0)
+    pixel_instructions: int = param(10, unit="instructions", doc="software rasterizer, per pixel of a "
+                                    "triangle's bounding box: 3 edge functions, the inside test, depth "
+                                    "interpolation", min=0)
+
+
+def per_triangle_cycles(gpu) -> float:
+    """Cycles per triangle of the front end's per-triangle stages (fetch, vertex shading, setup): the slowest."""
+    r, c = gpu.raster, gpu.core
+    lanes = r.vertex_lanes or c.sms * c.lanes_per_sm
+    fetch = r.vertices_per_triangle * r.vertex_bytes / (gpu.dram.bytes_per_cycle * gpu.memory.partitions)
+    shade = r.vertices_per_triangle * r.vertex_instructions / lanes
+    return max(1.0 / r.triangles_per_cycle, fetch, shade)
+
+
+def quad_ids(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> np.ndarray:
+    """A key of each fragment's 2x2 quad within its triangle (equal keys: one quad)."""
+    qw, qh = (width + 1) // 2, (height + 1) // 2
+    pixel = np.asarray(pixel, np.int64)
+    return np.asarray(prim, np.int64) * (qw * qh) + (pixel // width // 2) * qw + (pixel % width) // 2
+
+
+def bbox_pixels(prim: np.ndarray, pixel: np.ndarray, width: int, triangles: int) -> np.ndarray:
+    """Per triangle ``0..triangles-1``, the pixels of its fragments' bounding box (at least 1: a triangle that
+    covers no pixel centre still tests the pixel its bounding box rounds to)."""
+    out = np.ones(triangles, np.int64)
+    if not len(prim):
+        return out
+    x, y = pixel % width, pixel // width
+    big = np.iinfo(np.int64).max
+    x0 = np.full(triangles, big, np.int64)
+    y0 = np.full(triangles, big, np.int64)
+    x1 = np.full(triangles, -1, np.int64)
+    y1 = np.full(triangles, -1, np.int64)
+    np.minimum.at(x0, prim, x)
+    np.minimum.at(y0, prim, y)
+    np.maximum.at(x1, prim, x)
+    np.maximum.at(y1, prim, y)
+    has = x1 >= 0
+    out[has] = (x1[has] - x0[has] + 1) * (y1[has] - y0[has] + 1)
+    return out
 
 
 @register_unit
 class Rasterizer(Unit):
-    """The fixed-function rasterizer; built when a pass's warps come from it."""
+    """The fixed-function geometry front end; built when a pass's warps come from it."""
 
     name = "raster"
     Config = RasterConfig
-    STATS = occupancy_stats("cycles spent rasterizing the submitted triangles", "triangles",
-                            "triangles rasterized")
+    STATS = occupancy_stats("cycles the front end spent on the submitted triangles (its slowest stage)",
+                            "triangles", "triangles through the front end")
 
     def __init__(self, config: RasterConfig, machine):
         super().__init__(1)
-        self.rate = config.triangles_per_cycle
-        triangles = sum(p.triangles for p in machine.program.passes if p.warp_triangles is not None)
-        self.requests = [triangles]
-        self.busy_fp = [math.ceil(triangles * FP / self.rate)]
+        prog = machine.program
+        # a sampled run submits its share of the triangles: the per-triangle stages get that much faster
+        self.per_triangle = per_triangle_cycles(machine.gpu) * getattr(prog, "triangle_share", 1.0)
+        self.quad_rate = config.quads_per_cycle
+        fe = [p for p in prog.passes if p.warp_triangles is not None]
+        self.requests = [sum(p.triangles for p in fe)]
+        self.busy_fp = [sum(math.ceil(self._span(p) * FP) for p in fe)]
 
     @classmethod
     def needed(cls, program, gpu) -> bool:
         return any(p.warp_triangles is not None for p in program.passes)
 
+    def _span(self, p) -> float:
+        return max(p.triangles * self.per_triangle, p.quads / self.quad_rate)
+
     def warp_ready(self, p, start: int) -> list | None:
-        """The cycle each warp of pass ``p`` may start (its fragments' triangles rasterized), or None when
-        the pass does not come through the rasterizer."""
+        """The cycle each warp of pass ``p`` may start (its fragments' triangles out of the front end), or None
+        when the pass does not come through it."""
         if p.warp_triangles is None:
             return None
-        return (start + np.ceil(p.warp_triangles / self.rate).astype(np.int64)).tolist()
+        out = np.maximum(p.warp_triangles * self.per_triangle, p.warp_quads / self.quad_rate)
+        return (start + np.ceil(out).astype(np.int64)).tolist()
 
     def pass_floor(self, p, start: int) -> int:
-        """The earliest cycle pass ``p`` can end: every triangle it submits rasterized."""
-        return start + math.ceil(p.triangles / self.rate) if p.warp_triangles is not None else start
+        """The earliest cycle pass ``p`` can end: every triangle it submits through the front end."""
+        return start + math.ceil(self._span(p)) if p.warp_triangles is not None else start

@@ -3,8 +3,9 @@
 * ``full``: the event model (gpusim.hw.machine) on every operation.
 * ``sampled``: the event model on the operations of a random sample of
   non-empty screen tiles (``sample.tile``, ``sample.fraction``, ``sample.seed``)
-  and of the same share of threads without a pixel (clear passes), on a
-  machine whose rasterizer is sped up by the same share, and again on a
+  and of the same share of threads without a pixel (clear passes) and of
+  software-rasterizer triangles that cover no pixel, on a machine whose front
+  end's per-triangle stages are sped up by the same share, and again on a
   random half of that sample; each pass's cycles are extrapolated along the
   line through the two (a fixed latency part plus a part that grows with the
   work) to all of its operations.
@@ -24,7 +25,6 @@ import time
 import numpy as np
 
 from gpusim.hw.hazards import count_hazards, rmw_windows
-from gpusim.hw.gpu import with_section
 from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine
 from gpusim.hw.program import Program
@@ -135,13 +135,10 @@ def tile_sample(work: Workload, gpu, halve: bool = False):
 
 
 def _sample_run(work: Workload, gpu, keep):
-    """The event model on the threads ``keep`` keeps, on a machine whose rasterizer gets their share (so a
-    raster-bound pass scales with the sample too); (record, program)."""
+    """The event model on the threads ``keep`` keeps, on a machine whose front end gets their share of the
+    triangles (so a front-end-bound pass scales with the sample too); (record, program)."""
     program = lower(work, gpu, keep)
-    kept, total = sum(p.operations for p in program.passes), sum(p.operations_total for p in program.passes)
-    share = max(1, kept) / max(1, total)
-    sample_gpu = with_section(gpu, "raster", triangles_per_cycle=gpu.raster.triangles_per_cycle / share)
-    rec, _ = run_full(work, sample_gpu, program=program)
+    rec, _ = run_full(work, gpu, program=program)     # the front end gets the sample's share (Program)
     return rec, program
 
 

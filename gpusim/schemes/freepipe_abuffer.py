@@ -10,7 +10,9 @@ Passes:
    k >= layers is dropped (the counter still counts it).
 3. ``resolve`` (one thread per pixel): load the counter, load min(n, layers)
    depths and colours into registers, sort them there (``sort``: insertion or
-   bitonic, see gpusim.schemes.common.sorting) and composite front to back.
+   bitonic, see gpusim.schemes.common.sorting) and composite front to back
+   (ALU work timed from its compare-exchanges and fragments:
+   gpusim.schemes.common.alu).
 
 Footprint: ``counter`` (4 B per pixel), ``depth_array`` (``layers`` x 4 B per
 pixel), ``colour_array`` (``layers`` x the colour format per pixel). FreePipe
@@ -28,6 +30,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.common.alu import COMPARE_EXCHANGE, COMPOSITE, UNPACK_RGBA8, sort_compares
 from gpusim.schemes.common.arrays import Layout, entry_index
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.sorting import sort_runs
@@ -69,6 +72,10 @@ class FreePipeABuffer(Scheme):
         res = lambda i, s: entry_index(i, s, L, P, layout)  # noqa: E731
         plan.add(2, "load", "depth_array", pixels, kept_n, lambda i, s: res(i, s) * DEPTH_BYTES, DEPTH_BYTES, dep=True)
         plan.add(2, "load", "colour_array", pixels, kept_n, lambda i, s: res(i, s) * cb, cb, dep=True)
+        # in registers: sort the loaded list, then composite it front to back
+        unpack = UNPACK_RGBA8 if self.colour_format == "rgba8" else 0
+        plan.compute(2, pixels, sort_compares(kept_n, self.sort) * COMPARE_EXCHANGE
+                     + kept_n * (COMPOSITE + unpack))
 
         # resolve: the kept fragments of each pixel in load (arrival) order, sorted in registers
         loaded = g.by_arrival[kept[g.by_arrival]]

@@ -1,0 +1,157 @@
+"""The geometry front end, helper lanes of 2x2 quads, the software rasterizer and the driver's pass cost,
+against hand-computed timelines."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gpusim.hw import load_gpu
+from gpusim.hw.analytic import analytic_timing
+from gpusim.hw.lower import Workload, lower
+from gpusim.hw.machine import Machine
+from gpusim.hw.raster import bbox_pixels, per_triangle_cycles
+from gpusim.opplan import OpPlan, Pass, layout_bases
+
+from test_hw_units import SIMPLE
+
+WIDTH = 64
+
+
+class _Result:
+    """What the analytic level reads from a scheme result."""
+
+    def __init__(self, plan, bases):
+        self.plan, self._bases = plan, bases
+
+    def bases(self):
+        return self._bases
+
+
+def _draw(pixels, prims, triangles, software=False, extra=()):
+    """One geometry pass in which every fragment stores 4 bytes at its pixel."""
+    plan = OpPlan([Pass("draw", "geometry", "fragment", software=software)], ["fb"])
+    pixels = np.asarray(pixels, np.int64)
+    plan.add(0, "store", "fb", len(pixels), 1, lambda i, s: pixels[i] * 4, 4)
+    gpu = load_gpu("gtx280", SIMPLE + list(extra))
+    bases = layout_bases(plan.structures, {"fb": WIDTH * WIDTH * 4})
+    work = Workload(plan, bases, WIDTH, WIDTH, pixels, np.asarray(prims, np.int64), triangles=triangles)
+    return plan, gpu, work, bases
+
+
+def _run(gpu, work):
+    m = Machine(gpu, lower(work, gpu), WIDTH)
+    return m.run(), m
+
+
+def test_a_pass_lasts_as_long_as_its_front_end():
+    # 1,000 triangles submitted, 10 of them cover one pixel each: setup at 0.5 triangles/cycle takes 2,000 cycles,
+    # far more than the 10 fragments' stores (one warp, 100 cycles of latency)
+    plan, gpu, work, _ = _draw(np.arange(10) * 2, np.arange(10) * 100, 1000,
+                               extra=["raster.triangles_per_cycle=0.5", "raster.vertex_instructions=0",
+                                      "raster.vertex_bytes=0"])
+    assert per_triangle_cycles(gpu) == 2.0
+    cycles, m = _run(gpu, work)
+    assert cycles == 2000
+    assert m.units["raster"].summary(cycles)["requests"] == 1000
+
+
+def test_the_slowest_front_end_stage_decides():
+    # vertex shading on the one SM's 32 lanes: 3 vertices x 64 instructions / 32 lanes = 6 cycles per triangle;
+    # fetch: 3 x 64 B at 32 B/cycle = 6 cycles; setup 1 cycle: 6 cycles per triangle
+    extra = ["raster.triangles_per_cycle=1", "raster.vertices_per_triangle=3", "raster.vertex_instructions=64",
+             "raster.vertex_bytes=64"]
+    _, gpu, _, _ = _draw([0], [0], 1, extra=extra)
+    assert per_triangle_cycles(gpu) == 6.0
+    _, gpu, _, _ = _draw([0], [0], 1, extra=extra + ["raster.vertex_lanes=96"])      # dedicated vertex lanes
+    assert per_triangle_cycles(gpu) == 6.0                                              # fetch still 6
+    _, gpu, _, _ = _draw([0], [0], 1, extra=extra + ["raster.vertex_lanes=96", "raster.vertex_bytes=16"])
+    assert per_triangle_cycles(gpu) == 2.0                                              # 3 x 64 / 96
+
+
+def test_quads_bound_the_rasterizer():
+    # one triangle covering a 16x16 block: 64 quads at 0.5 quads/cycle = 128 cycles
+    px = (np.arange(16)[:, None] * WIDTH + np.arange(16)[None, :]).ravel()
+    plan, gpu, work, bases = _draw(px, np.zeros(len(px)), 1, extra=["raster.quads_per_cycle=0.5"])
+    prog = lower(work, gpu)
+    assert prog.passes[0].quads == 64
+    m = Machine(gpu, prog, WIDTH)
+    assert m.run() >= 128
+    rec = analytic_timing(_Result(plan, bases), work, gpu)
+    assert rec["passes"][0]["bound"] == "raster"
+
+
+def test_partial_quads_fill_warps_with_helper_lanes():
+    # 32 fragments in 8 full quads fill one warp; 32 fragments each alone in its quad need 4 warps (128 lanes)
+    full = np.array([2 * (q // 8) * WIDTH + 2 * (q % 8) + dy * WIDTH + dx for q in range(8)
+                     for dy in (0, 1) for dx in (0, 1)])
+    sparse = np.arange(32) * 2
+    for pixels, quads, warps in ((full, 8, 1), (sparse, 32, 4)):
+        _, gpu, work, _ = _draw(pixels, np.zeros(32), 1)
+        prog = lower(work, gpu)
+        assert (prog.passes[0].quads, prog.passes[0].warps) == (quads, warps)
+
+
+def test_software_rasterizer_runs_every_submitted_triangle():
+    # 40 triangles submitted, only triangle 0 covers pixels (a 3x2 box): 2 warps of triangle threads, each
+    # loading indices then vertices, the first scanning 6 pixels
+    pixels = [0, 1, 2, WIDTH, WIDTH + 1, WIDTH + 2]
+    _, gpu, work, _ = _draw(pixels, np.zeros(6), 40, software=True,
+                            extra=["raster.setup_instructions=50", "raster.pixel_instructions=5"])
+    prog = lower(work, gpu)
+    assert prog.passes[0].warps == 2
+    first, second = prog.warp(0), prog.warp(1)
+    assert [i.op for i in first[:2]] == ["load", "load"] and first[2].cycles == 50 + 5 * 6
+    assert [i.op for i in second[:2]] == ["load", "load"] and second[2].cycles == 50 + 5 * 1
+    assert len(second) == 3                          # no fragments: loads and setup only
+    assert list(bbox_pixels(np.zeros(6, np.int64), np.asarray(pixels), WIDTH, 3)) == [6, 1, 1]
+
+
+def test_setup_waits_for_the_vertices():
+    # one warp, one triangle: the index load (1 segment + 100 latency), the vertex load after it (48 B: 2 segments
+    # + 100), setup, then the fragment's store (1 + 100). Setup works on the vertices, so it cannot hide in the
+    # loads' latency: each of its cycles adds one.
+    def cycles(setup):
+        _, gpu, work, _ = _draw([0], [0], 1, software=True,
+                                extra=[f"raster.setup_instructions={setup}", "raster.pixel_instructions=0"])
+        return _run(gpu, work)[0]
+    assert cycles(0) == (1 + 100) + (2 + 100) + (1 + 100)
+    assert cycles(50) == cycles(0) + 50
+
+
+def test_the_driver_pays_each_pass():
+    plan = OpPlan([Pass("a", "fullscreen", "pixel"), Pass("b", "fullscreen", "pixel")], ["fb"])
+    plan.add(0, "store", "fb", 32, 1, lambda i, s: i * 4, 4)
+    plan.add(1, "store", "fb", 32, 1, lambda i, s: i * 4, 4)
+    bases = layout_bases(plan.structures, {"fb": 128})
+    base = None
+    for us in (0.0, 1.0):
+        gpu = load_gpu("gtx280", SIMPLE + [f"driver.pass_us={us}", "core.clock_mhz=1000"])
+        work = Workload(plan, bases, WIDTH, WIDTH, np.zeros(0, np.int64), np.zeros(0, np.int64), triangles=0)
+        cycles, _ = _run(gpu, work)
+        ana = analytic_timing(_Result(plan, bases), work, gpu)["total"]
+        if base is None:
+            base, ana_base = cycles, ana
+    assert cycles - base == 2 * 1000                  # 1 us at 1,000 MHz before each of the 2 passes
+    assert ana - ana_base == 2 * 1000
+
+
+def test_alu_work_runs_as_long_as_the_busiest_lane():
+    # a resolve thread per pixel: load (100 latency), then 10 / 30 / 0 ALU instructions on its value, then a store;
+    # the warp issues the busiest lane's 30 after the load returns
+    plan = OpPlan([Pass("resolve", "fullscreen", "pixel")], ["fb"])
+    plan.add(0, "load", "fb", 3, 1, lambda i, s: i * 4, 4)
+    plan.compute(0, 3, [10, 30, 0])
+    plan.add(0, "store", "fb", 3, 1, lambda i, s: i * 4, 4, dep=True)
+    assert plan.accesses() == {"fb": {"load": 3, "store": 3}} and plan.total_ops() == 6
+    bases = layout_bases(plan.structures, {"fb": 64})
+    gpu = load_gpu("gtx280", SIMPLE)
+    work = Workload(plan, bases, WIDTH, WIDTH, np.zeros(0, np.int64), np.zeros(0, np.int64), triangles=0)
+    prog = lower(work, gpu)
+    from gpusim.hw.program import Compute
+    assert prog.warp(0)[1] == Compute(30)
+    assert prog.operations == 6
+    cycles, _ = _run(gpu, work)
+    assert cycles == (1 + 100) + 30 + (1 + 100)
+    rec = analytic_timing(_Result(plan, bases), work, gpu)
+    assert rec["passes"][0]["cycles"] >= 30
