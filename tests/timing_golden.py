@@ -1,8 +1,8 @@
 """The golden timing table: every scheme on two scenes, three GPUs and three fidelity levels.
 
-Recorded before gpusim.hw was rebuilt on simpy (``tests/fixtures/timing_golden.json``);
-``test_timing_golden`` checks that the rebuilt model gives the same cycles, per-pass
-cycles, per-unit busy cycles and requests, and RMW hazards. Regenerate only for a
+Kept in ``tests/fixtures/timing_golden.json``; ``test_timing_golden`` checks that the
+model gives the same cycles, per-pass cycles, per-unit busy cycles and requests, and
+RMW hazards. Regenerate only for a
 deliberate change of the model, and explain each difference in the commit:
 
     .venv/bin/python tests/timing_golden.py --write

@@ -7,8 +7,9 @@ reaches it (``Unit.needed``), the memory levels in ``memory.levels`` order.
 
 Each pass starts ``driver.pass_us`` after the one before it (the draw call or
 kernel launch: gpusim.hw.driver). Passes are barriers: a pass ends when its
-last operation has completed and every unit is idle again (stores landed, the ROPs drained), so the next pass
-starts on an idle machine and its cycles do not depend on when it starts. A
+last operation has completed and every unit is idle again (stores landed,
+the ROPs drained), so the next pass starts on an idle machine and its cycles
+do not depend on when it starts. A
 ``flush`` pass (the k-buffer's batching heuristic) drains the pipeline
 (``core.pipeline_latency``) and runs a full-screen quad of ALU-only fragments.
 
