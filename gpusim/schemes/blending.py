@@ -26,6 +26,14 @@ depth) and fills ``depth_buffer``; transparent fragments behind it fail the
 depth test (``culled_fragments``) and the transparent result is blended over
 the opaque image. With ``opaque = blend`` opaque fragments are blended like
 any other with alpha 1.
+
+ALU work beyond each operation's own (gpusim.schemes.common.alu): an
+``alpha-blend`` fragment's program only hands its colour to the ROP, whose
+``blend`` does the arithmetic, so it declares none. A ``wboit`` fragment
+evaluates its weight function (``WBOIT_WEIGHT``) and premultiplies its colour
+by a w (``PREMULTIPLY``); the composite pass divides and applies the revealage
+per pixel (``WBOIT_RESOLVE``), and without an opaque pre-pass also mixes in the
+background itself (``COMPOSITE``; with one, the framebuffer ``blend`` does).
 """
 
 from __future__ import annotations
@@ -39,6 +47,7 @@ from gpusim.config import param
 from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.common.alu import COMPOSITE, PREMULTIPLY, WBOIT_RESOLVE, WBOIT_WEIGHT
 from gpusim.schemes.common.fold import fold
 from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, rounder
@@ -192,11 +201,15 @@ class WeightedBlendedOIT(Scheme):
             blended, culled = np.ones(n, bool), 0
         tp = len(passes) - 2
         b_idx = np.flatnonzero(blended)
+        # the weight w(z, a) and the premultiplied outputs (c a w, a w); the revealage output is a
+        plan.compute(tp, b_idx, WBOIT_WEIGHT[self.weight] + PREMULTIPLY, dep=prepass)
         plan.add(tp, "blend", "accumulation", b_idx, 1, lambda i, s: pix[b_idx[i]] * ab, ab, dep=prepass)
         plan.add(tp, "blend", "revealage", b_idx, 1, lambda i, s: pix[b_idx[i]] * rb, rb, dep=prepass)
         pixels = P
         plan.add(tp + 1, "load", "accumulation", pixels, 1, lambda i, s: i * ab, ab)
         plan.add(tp + 1, "load", "revealage", pixels, 1, lambda i, s: i * rb, rb)
+        # accum.rgb / clamp(accum.a) and 1 - revealage; over the background here, or by the framebuffer's blend
+        plan.compute(tp + 1, pixels, WBOIT_RESOLVE + (0 if prepass else COMPOSITE))
         if prepass:
             plan.add(tp + 1, "blend", "framebuffer", pixels, 1, lambda i, s: i * 4, 4, dep=True)
 

@@ -23,6 +23,14 @@ occlusion-query`` depth peeling runs one more pass, the one whose query finds
 no fragment left (dual depth peeling's last pass already finds its inner
 range empty). ``max_passes`` caps the peel passes; deeper layers are dropped.
 Accumulation arithmetic is float32; stored layer colours use ``colour_format``.
+
+ALU work beyond each operation's own (gpusim.schemes.common.alu): in every
+pass that reads the previous depth(s), each fragment tests itself against them
+(``PEEL_TEST``; dual: against the min and max, ``DUAL_PEEL_TEST``) before its
+depth test or blends. Depth peeling's per-layer ``blend`` passes and dual depth
+peeling's front and back accumulations are ROP blends (no shader arithmetic);
+dual depth peeling's ``final`` pass composites the back colour behind the front
+one per pixel (``COMPOSITE``).
 """
 
 from __future__ import annotations
@@ -35,6 +43,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.common.alu import COMPOSITE, DUAL_PEEL_TEST, PEEL_TEST
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
@@ -80,6 +89,8 @@ class DepthPeeling(Scheme):
         at = lambda size: (lambda i, s: pix[i] * size)  # noqa: E731
         plan.add(0, "load", "peel_depth", frags, max(total - 1, 0), at(DEPTH_BYTES), DEPTH_BYTES,
                  seq_pass=2 * np.arange(1, max(total, 1)))
+        for p in range(1, total):     # each pass after the first: strictly behind the peeled depth, or discard
+            plan.compute(2 * p, frags, PEEL_TEST)
         plan.add(0, "depth_test", "depth_buffer", frags, np.minimum(d + 1, peels), at(DEPTH_BYTES),
                  DEPTH_BYTES, dep=True, seq_pass=2 * np.arange(peels))
         peeled = np.minimum(lay, peels)
@@ -135,6 +146,8 @@ class DualDepthPeeling(Scheme):
         plan.add(0, "blend", "minmax_depth", frags, 1, lambda i, s: tex(i, s, 0), mm)
         plan.add(0, "load", "minmax_depth", frags, peels, lambda i, s: tex(i, s, s), mm,
                  seq_pass=np.arange(1, peels + 1))
+        for k in range(1, peels + 1):   # at the previous min (front), at its max (back), or strictly inside
+            plan.compute(k, frags, DUAL_PEEL_TEST)
         inside = np.minimum(m, peels)
         plan.add(0, "blend", "minmax_depth", frags, inside, lambda i, s: tex(i, s, s + 1), mm, dep=True,
                  seq_pass=np.arange(1, peels + 1))
@@ -147,6 +160,7 @@ class DualDepthPeeling(Scheme):
         final = len(passes) - 1
         plan.add(final, "load", "front_colour", pixels, 1, lambda i, s: i * cb, cb)
         plan.add(final, "load", "back_colour", pixels, 1, lambda i, s: i * cb, cb)
+        plan.compute(final, pixels, COMPOSITE)      # the back accumulation behind the front one
 
         # composite order: front layers by depth (ties: submission), then back layers by depth
         # with ties reversed (back-to-front 'over' blending makes the later one nearer)

@@ -25,7 +25,15 @@ Colour (the array holds depths only):
   from different fragments) and order inversions are measured, not assumed.
 
 Passes: ``clear`` (one store per entry of each array), ``capture``, (``colour``),
-``resolve`` (one thread per pixel: loads entries until the first empty one).
+``resolve`` (one thread per pixel: loads entries until the first empty one,
+then composites them front to back; the array is already in depth order).
+
+ALU work beyond each operation's own (gpusim.schemes.common.alu): an atomic
+iteration's ``max(new, old)`` and compare are the operation's; with packing a
+fragment packs its two words before the chains (``PACK_DEPTH_COLOUR`` each);
+the resolve unpacks each stored entry's colour (``UNPACK_RGBA8`` for an rgba8
+``colour_array``; with packing ``UNPACK_SPLIT_RGB24``, the 12-bit halves
+re-joined) and composites it (``COMPOSITE``).
 With ``direction = max`` the arrays hold the *farthest* ``layers`` values in
 descending order, and a value equal to 0 (the empty value) cannot be stored.
 """
@@ -41,6 +49,7 @@ from gpusim.config import param
 from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_image, register
+from gpusim.schemes.common.alu import COMPOSITE, PACK_DEPTH_COLOUR, UNPACK_RGBA8, UNPACK_SPLIT_RGB24
 from gpusim.schemes.common.arrays import (Layout, count_before_in_pixel, entry_index, pixel_key, rank_in_runs,
                                           smallest_per_pixel)
 from gpusim.schemes.common.depthkey import EMPTY, colour24, colour24_rgb, packed_depth
@@ -91,6 +100,8 @@ class FreePipeMDTS(Scheme):
 
         kept: dict[str, np.ndarray] = {}
         frags = n
+        if self.packing:   # depth and a colour half packed into each of the two words
+            plan.compute(1, frags, len(values) * PACK_DEPTH_COLOUR, dep=False)
         for name, value in values.items():
             storable = value != empty
             sort_value = value if self.direction == "min" else np.uint32(0xFFFFFFFF) - value
@@ -117,6 +128,9 @@ class FreePipeMDTS(Scheme):
         plan.add(resolve_pass, "load", "depth_array", pixels, sentinel,
                  lambda i, s: res(i, s) * DEPTH_BYTES, DEPTH_BYTES)
         plan.add(resolve_pass, "load", "colour_array", pixels, kept_n, lambda i, s: res(i, s) * cb, cb)
+        # in registers: unpack each loaded entry's colour and composite it (the array is in depth order)
+        unpack = UNPACK_SPLIT_RGB24 if self.packing else UNPACK_RGBA8 if self.colour_format == "rgba8" else 0
+        plan.compute(resolve_pass, pixels, kept_n * (COMPOSITE + unpack))
 
         if self.direction == "max":      # entries descend: the resolve reads them back to front
             order, rgba = self._reverse_runs(pix, order, rgba)

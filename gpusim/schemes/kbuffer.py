@@ -35,6 +35,16 @@ Hardware (``hw``, section 3.1):
 * ``blender`` (proposal 2): one ``program_blend`` per fragment at the ROP,
   reading and writing the pixel's k entries in submission order.
 
+ALU work beyond each operation's own (gpusim.schemes.common.alu): between its
+reads and writes a fragment's program inserts itself into the k sorted entries,
+k compare-exchanges of depth + colour entries (``compare_exchange`` of the
+colour format: RGBZ entries move more registers than a depth alone), and in
+``sort-blend`` a fragment that finds the k entries full composites the nearest
+of the k + 1 into the framebuffer (``COMPOSITE``). With ``hw = blender`` that
+program runs in the blender (``program_blend``), not on the SM. The resolve
+composites each pixel's min(n, k) stored entries, already in depth order. The
+entries are textures (MRTs): the texture path converts their format.
+
 ``extras["rmw_replay"]`` replays the program in the timing model's event order
 (gpusim.schemes.common.kbuffer_replay) so the timed image shows the hazards' artifacts.
 """
@@ -49,6 +59,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.common.alu import COMPOSITE, compare_exchange
 from gpusim.schemes.common.arrays import entry_index, smallest_per_pixel
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.groups import PixelGroups
@@ -118,6 +129,9 @@ class KBuffer(Scheme):
             if blend:
                 fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
                 plan.add(frag_pass, "rmw_read", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES)
+            # modify: insert into the k sorted entries; sort-blend: a full buffer composites its nearest
+            insert = k * compare_exchange(COLOUR_BYTES[self.colour_format])
+            plan.compute(frag_pass, frags, insert + (COMPOSITE * (g.arrival >= k) if blend else 0))
             plan.add(frag_pass, "rmw_write", "kbuffer", frags, k, at, entry_bytes, dep=True)
             if blend:
                 plan.add(frag_pass, "rmw_write", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES, dep=True)
@@ -127,6 +141,7 @@ class KBuffer(Scheme):
         if blend:
             plan.add(resolve, "load", "framebuffer", pixels, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES)
+        plan.compute(resolve, pixels, np.minimum(g.count, k) * COMPOSITE)   # the stored entries, nearest first
 
         stats: dict[str, Stat] = {"batches": Stat(n_batches, "batches", "geometry batches (flushes + 1)")}
         if blend:

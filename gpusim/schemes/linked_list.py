@@ -18,6 +18,11 @@ sort it (stable insertion sort by default: equal depths end in *walk* order,
 i.e. the later-submitted fragment in front, unlike the reference) and
 composite front to back. The walk is run for real over the pointer arrays, so
 a list that loses or repeats a node would show in the captured lists.
+
+ALU work beyond each operation's own (gpusim.schemes.common.alu): the resolve
+sorts the m nodes it loaded (``sort_compares(m)`` x ``compare_exchange`` of
+depth + colour), then unpacks (``UNPACK_RGBA8`` for rgba8 nodes: a raw buffer)
+and composites (``COMPOSITE``) each one; m is each pixel's real walk length.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.common.alu import COMPOSITE, UNPACK_RGBA8, compare_exchange, sort_compares
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.sorting import sort_runs
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat
@@ -111,6 +117,10 @@ class LinkedList(Scheme):
         first_visit = np.r_[0, np.cumsum(loads)[:-1]]
         plan.add(2, "load", "nodes", pixels, loads,
                  lambda i, s: visited_nodes[first_visit[i] + s] * node_bytes, node_bytes, dep=True)
+        # in registers: sort the walked nodes, then unpack and composite them front to back
+        exchange = compare_exchange(COLOUR_BYTES[self.colour_format])
+        unpack = UNPACK_RGBA8 if self.colour_format == "rgba8" else 0
+        plan.compute(2, pixels, sort_compares(loads, self.sort) * exchange + loads * (COMPOSITE + unpack))
 
         loaded = w_node[keep]                              # walk order: most recent first
         perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)

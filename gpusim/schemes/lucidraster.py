@@ -26,6 +26,15 @@ accumulated alpha >= 1 - 1/128, checked after each segment of 256 samples
 (samples ordered by tri-half-block, then row by row from the top-left); the
 samples not shaded are counted (``skipped_samples``).
 
+ALU work beyond each operation's own (gpusim.schemes.common.alu), per bin
+thread in the raster pass: phase 2's bitonic sorts of single-word keys
+(``bitonic_compares`` x ``KEY_COMPARE_EXCHANGE``) of each block's tri-blocks
+(low rasterizer) or each half-block's tri-half-blocks (high rasterizer, which
+sorts them directly), at their real lengths; phase 3's depth filter per shaded
+sample, ``depth_filter`` compare-exchanges of depth-colour pairs
+(``COMPARE_EXCHANGE``), and its blend (``COMPOSITE``). Samples skipped by the
+alpha threshold cost neither.
+
 Footprint: per-triangle data (84 B: normal, barycentric and depth edge
 functions, scanline data), per-bin triangle counts, offsets and lists, the
 scratch buffers of ``workgroups`` persistent workgroups (low rasterizer 128 KiB:
@@ -43,6 +52,7 @@ from gpusim.config import param
 from gpusim.metrics.composite import composite_runs, runs_by_length
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.common.alu import COMPARE_EXCHANGE, COMPOSITE, KEY_COMPARE_EXCHANGE, bitonic_compares
 from gpusim.schemes.common.arrays import rank_in_runs
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.depthkey import depth_key
@@ -145,7 +155,8 @@ class LucidRaster(Scheme):
         counts = {"tbr": np.bincount(grid.bin_of_block_row(tbr_region), minlength=B),
                   "tb": np.bincount(grid.bin_of_block(tb_block), minlength=B),
                   "thb_bin": grid.bin_of_half_block(thb_region), "thb_tri": thb_tri,
-                  "covered": np.flatnonzero(g.count)}
+                  "covered": np.flatnonzero(g.count), "block_tris": block_tris, "thb_region": thb_region,
+                  "shaded": np.bincount(grid.bin_of_pixel(pix[~skipped]), minlength=B)}
         plan, struct, overflow = self._plan(trace, grid, tri, tris, pb_bin, pb_tri, bin_tris, counts, high | promoted)
         covered_bins = int(np.count_nonzero(bin_tris))
         stats = {
@@ -229,6 +240,13 @@ class LucidRaster(Scheme):
                  dep=True)
         plan.add(4, "load", "tri_data", bins, bin_tris[bins],                 # scanline data (last 32 B)
                  lambda i, s: tri_pos[pb_tri[first[bins[i]] + s]] * T + T - 32, 32, dep=True)
+        # phase 2's sorts per bin: each block's tri-blocks (low), each half-block's tri-half-blocks (high)
+        sorts = {}
+        for name, tris_in, bin_of in (("block", counts["block_tris"], grid.bin_of_block),
+                                      ("half", np.bincount(counts["thb_region"]), grid.bin_of_half_block)):
+            sorts[name] = np.zeros(B, np.int64)
+            np.add.at(sorts[name], bin_of(np.arange(len(tris_in))), bitonic_compares(tris_in))
+        sort_work = np.where(to_high, sorts["half"], sorts["block"]) * KEY_COMPARE_EXCHANGE
         slot = np.arange(len(bins)) % WG                                      # persistent workgroup of each bin
         overflow = 0
         for name, size, sel in (("scratch_low", LOW_SCRATCH, ~to_high[bins]), ("scratch_high", HIGH_SCRATCH,
@@ -243,10 +261,13 @@ class LucidRaster(Scheme):
                                                          + (s * TRI_HALF_BLOCK_BYTES) % half)
             plan.add(4, "store", name, b, tbr[b], rows, TRI_BLOCK_ROW_BYTES)
             plan.add(4, "load", name, b, tb[b], rows, TRI_BLOCK_ROW_BYTES, dep=True)
+            plan.compute(4, b, sort_work[b])
             plan.add(4, "store", name, b, thb[b], halves, TRI_HALF_BLOCK_BYTES)
             plan.add(4, "load", name, b, thb[b], halves, TRI_HALF_BLOCK_BYTES, dep=True)
         plan.add(4, "load", "tri_data", bins, thb[bins],                       # shading data per tri-half-block
                  lambda i, s: tri_pos[thb_tri[thb_order[thb_first[bins[i]] + s]]] * T + 4, 32, dep=True)
+        # phase 3: every shaded sample passes the pixel's depth filter and is blended
+        plan.compute(4, bins, counts["shaded"][bins] * (self.depth_filter * COMPARE_EXCHANGE + COMPOSITE))
         plan.add(4, "store", "framebuffer", bins, px[bins],
                  lambda i, s: covered[cov_order[cov_first[bins[i]] + s]] * 4, 4, dep=True)
         low_b, high_b = bins[~to_high[bins]], bins[to_high[bins]]

@@ -27,6 +27,11 @@ FIFO (arrival) order, so the earlier fragment ends up *behind* the later one,
 the opposite of the reference's order (``tie_blends`` counts them). With
 distinct depths a pixel with i fragments is read i(i+1)/2 times in total.
 The FIFO is circular: the k-th write goes to entry k mod N_f.
+
+ALU work beyond each operation's own (gpusim.schemes.common.alu): every read
+of a recirculation pass compares the fragment with its pixel's second z and
+branches, to the blend or back to the FIFO (``RECIRCULATE_TEST``); the blend is
+the ROP's. No sort: recirculation is the sort.
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.common.alu import RECIRCULATE_TEST
 from gpusim.schemes.common.arrays import pixel_key
 from gpusim.schemes.common.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
 from gpusim.schemes.common.fold import fold
@@ -115,6 +121,10 @@ class RBuffer(Scheme):
                  lambda i, s: slot(fifo_sequence(pos[i], s + 1, members)), SF, seq_pass=read_pass)
         plan.add(2, "depth_test", "second_z_buffer", stored, removal, lambda i, s: pix[stored[i]] * ZB, ZB,
                  dep=True, seq_pass=read_pass)
+        reading, left = stored, removal            # the fragments pass p reads, and the passes they stay for
+        for p in range(1, n_pass + 1):             # at the second z: blend and leave; else write back
+            plan.compute(1 + p, reading, RECIRCULATE_TEST)
+            reading, left = reading[left > p], left[left > p]
         vis_pos = np.flatnonzero(~occluded)
         plan.add(2, "blend", "framebuffer", stored[vis_pos], 1, lambda i, s: pix[stored[vis_pos[i]]] * fb_bytes,
                  fb_bytes, dep=True, pass_fn=lambda i, s: 1 + removal[vis_pos[i]])

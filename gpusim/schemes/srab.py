@@ -11,7 +11,10 @@ pass (FreePipe Table 3 counts SRAB as 2 geometry passes) re-renders the scene
 with one ``stencil`` test per fragment against the last sample, counted by an
 occlusion query, to detect pixels that lost fragments. A full-screen
 ``resolve`` loads the captured samples, sorts them (bitonic, as in the sketch)
-and composites front to back.
+and composites front to back: per pixel the sort's compare-exchanges of its
+min(n, k) samples (``sort_compares`` x ``compare_exchange`` of depth + colour)
+and one ``COMPOSITE`` per sample (gpusim.schemes.common.alu; the samples are
+read as a texture, which converts their format). Routing is the stencil unit's.
 
 Footprint: ``samples`` (k x (4 B depth + colour) per pixel: 16 MiB for
 512 x 512 with k = 8 and rgba8, FreePipe Table 3's 16 MB) and ``stencil``
@@ -28,6 +31,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.common.alu import COMPOSITE, compare_exchange, sort_compares
 from gpusim.schemes.common.arrays import entry_index
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.sorting import sort_runs
@@ -68,6 +72,8 @@ class StencilRoutedABuffer(Scheme):
                      STENCIL_BYTES)
         kept_n = np.minimum(g.count, k)
         plan.add(len(passes) - 1, "load", "samples", P, kept_n, lambda i, s: sample_at(i, s) * sb, sb)
+        exchange = compare_exchange(COLOUR_BYTES[self.colour_format])
+        plan.compute(len(passes) - 1, P, sort_compares(kept_n, self.sort) * exchange + kept_n * COMPOSITE)
 
         loaded = g.by_arrival[g.arrival[g.by_arrival] < k]
         perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)

@@ -42,6 +42,16 @@ saved, and a section holds fragments while both its ``l_num`` slots and its
 ``section_bytes`` last. Fragments that had to open a section early
 (``section_breaks``) and fragments larger than a whole section
 (``unfit_fragments``, dropped) are counted.
+
+ALU work beyond each operation's own (gpusim.schemes.common.alu): with
+leading-0s elimination every fragment that passes early z compresses its colour
+and forms its Length-table field before it walks the chain (``LEADING_ZEROS``:
+its size decides where it fits), and the read pass decodes each visible
+fragment's colour (``LEADING_ZEROS_DECODE``). The read pass computes the
+weight factors as Weight-Factor does (seed 003 section 4.3.2): each pair of a
+pixel's m visible fragments compared once, m (m - 1) / 2 x
+``WEIGHT_FACTOR_PAIR``, and each fragment blended with its weight
+(``COMPOSITE``); m is each pixel's real count.
 """
 
 from __future__ import annotations
@@ -55,6 +65,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.common.alu import LEADING_ZEROS, LEADING_ZEROS_DECODE, weight_factor_work
 from gpusim.schemes.common.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
                                            storage_bytes)
 from gpusim.schemes.common.groups import PixelGroups
@@ -123,7 +134,9 @@ class TFSS(Scheme):
         lt_field = length_field_bits(bits, lze)
         lt_bytes = math.ceil(L * lt_field / 8)
 
-        # capture (Figure 3-8), each stored fragment in program order
+        # capture (Figure 3-8), each stored fragment in program order; first its colour compressed
+        if lze != "off":
+            plan.compute(1, cand, LEADING_ZEROS)
         plan.add(1, "load", "ssa_table", kept, 1, lambda i, s: pix[kept[i]] * SA, SA, dep=True)
         plan.add(1, "load", "nsa_table", kept, pl.chain[kept],
                  lambda i, s: section(pix[kept[i]], s) * SA, SA, dep=True)
@@ -156,6 +169,8 @@ class TFSS(Scheme):
         plan.add(2, "load", "t_buffer", rpix, rcount, lambda i, s: t_off[read_order[rstart[i] + s]],
                  lambda i, s: t_bytes[read_order[rstart[i] + s]], dep=True)
         vis = ez.visible & pl.kept
+        m = np.bincount(pix[vis], minlength=P)[rpix]        # visible fragments per pixel read
+        plan.compute(2, rpix, weight_factor_work(m) + m * (LEADING_ZEROS_DECODE if lze != "off" else 0))
         blended = resolve_writes(plan, 2, pix, vis, P, fb_bytes)
         image, order = weighted_image(trace, g, vis, cand, col, ez.opaque_rgb, self.ties)
 

@@ -16,6 +16,11 @@ NULL. ``clear`` sets the W x H static pointers to NULL. ``read`` (Figure 2-6):
 per pixel with fragments, read each section's pointer (simultaneously with the
 section, seed 003 section 4.3.2) and each fragment once; weight factors by
 Eq. 2-4 (gpusim.schemes.common.weights) over the frame buffer's opaque colour.
+
+ALU work beyond each operation's own (gpusim.schemes.common.alu): the read
+pass compares each pair of a pixel's m visible fragments once, m (m - 1) / 2 x
+``WEIGHT_FACTOR_PAIR`` (Figure 2-6's WEIGHT FACTOR COMPUTATION), and blends each
+with its weight (``COMPOSITE``); m is each pixel's real count.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.common.alu import weight_factor_work
 from gpusim.schemes.common.early_z import (early_z, pipeline_buffers, pipeline_structures, resolve_writes,
                                            storage_bytes)
 from gpusim.schemes.common.groups import PixelGroups
@@ -92,6 +98,7 @@ class WeightFactor(Scheme):
         plan.add(2, "load", "pointer_memory", rpix, nsec, lambda i, s: section(rpix[i], s) * SA, SA)
         plan.add(2, "load", "m_buffer", rpix, rcount, lambda i, s: m_off[stored_order[rstart[i] + s]], FB,
                  dep=True)
+        plan.compute(2, rpix, weight_factor_work(np.bincount(pix[ez.visible], minlength=P)[rpix]))
         blended = resolve_writes(plan, 2, pix, ez.visible, P, fb_bytes)
         col = stored_colours(trace.rgba[kept], bits, 8 * FB, "off")
         image, order = weighted_image(trace, g, ez.visible, kept, col, ez.opaque_rgb, self.ties)

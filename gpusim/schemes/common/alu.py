@@ -22,6 +22,44 @@ PACK_DEPTH_COLOUR = 6
 WEIGHT = 6
 #: count leading zeros of the four colour channels and the section's Length-table entry (TFSS, seed 003)
 LEADING_ZEROS = 10
+#: a compare-exchange of single-word keys (LucidRaster's 22 depth bits over a 10-bit index): a min and a max
+KEY_COMPARE_EXCHANGE = 2
+#: re-joining FreePipe's two 12-bit colour halves (seed 000 section 4.1.2): 2 masks, a shift, an or; then
+#: 3 channel extracts and 3 conversions of the 24-bit RGB
+UNPACK_SPLIT_RGB24 = 10
+#: premultiplying the output colour by a weight or alpha: 3 multiplies
+PREMULTIPLY = 3
+#: WBOIT's resolve of one pixel: clamp accum.a (min, max), its reciprocal, 3 multiplies of accum.rgb, 1 - revealage
+WBOIT_RESOLVE = 7
+#: a depth-peeling fragment against the previous pass's depth: a compare and the discard it decides
+PEEL_TEST = 2
+#: a dual-depth-peeling fragment against the previous min and max: 2 compares (front, back), 2 selects of outputs
+DUAL_PEEL_TEST = 4
+#: an R-buffer fragment against its pixel's second z: a compare and the branch (blend and leave, or write back)
+RECIRCULATE_TEST = 2
+#: one pair of a pixel's fragments in Eq. 4's weight factors (seed 003 Figure 2-6): compare the depths, select
+#: which weight takes the other's (1 - a) (2 selects), 2 multiplies
+WEIGHT_FACTOR_PAIR = 5
+#: reading a leading-0s-eliminated colour back (seed 003 section 3.3): the Length-table field's shift and mask,
+#: then per RGB channel its bit offset (an add), a shift and a mask
+LEADING_ZEROS_DECODE = 11
+
+#: WBOIT's weight function per fragment (McGuire & Bavoil 2013 eq. 7-10, as gpusim.schemes.blending), times
+#: alpha; |z| from window depth d is near far / (far - d (far - near)): an fma, a reciprocal, a multiply (3)
+WBOIT_WEIGHT: dict[str, int] = {
+    "constant": 0,        # w = a: nothing to evaluate
+    "eq10": WEIGHT,       # 1 - d, its square and cube (2), x 3e3, max, x a
+    "eq7": 3 + 12,        # |z|; z/5 and fma((z/5)^2, +1e-5); z/200 and ^2, ^4, ^6 (4); add; rcp; x 10; clamp (2); x a
+    "eq8": 3 + 13,        # |z|; z/10, ^2, fma(^3, +1e-5) (3); z/200, ^2, ^4, ^6 (4); add; rcp; x 10; clamp (2); x a
+    "eq9": 3 + 8,         # |z|; z/200, ^2, fma(^4, +1e-5) (3); rcp; x 0.03; clamp (2); x a
+}
+
+
+def compare_exchange(payload_bytes: int) -> int:
+    """Instructions of one compare-exchange of (depth, payload) entries whose payload takes ``payload_bytes``
+    (in 32-bit registers): the compare, then for each of the two outputs a select per register.
+    ``COMPARE_EXCHANGE`` is the one-register case (a packed rgba8 colour): an RGBA32F entry costs 11."""
+    return 1 + 2 * (1 + -(-int(payload_bytes) // 4))
 
 
 def insertion_compares(length: np.ndarray, inversions: np.ndarray | None = None) -> np.ndarray:
@@ -52,3 +90,11 @@ def sort_compares(length: np.ndarray, method: str) -> np.ndarray:
     if method == "insertion":
         return insertion_compares(length)
     raise ValueError(f"unknown sort {method!r} (valid: insertion, bitonic)")
+
+
+def weight_factor_work(fragments: np.ndarray) -> np.ndarray:
+    """Instructions of Eq. 2-4's read-out of a pixel with ``fragments`` visible fragments (seed 003 Figure 2-6;
+    Weight-Factor and TFSS): each pair compared once (``WEIGHT_FACTOR_PAIR``), each fragment blended with its
+    weight (``COMPOSITE``)."""
+    m = np.asarray(fragments, np.int64)
+    return m * (m - 1) // 2 * WEIGHT_FACTOR_PAIR + m * COMPOSITE
