@@ -113,7 +113,7 @@ def test_config_command_prints_runs_and_count(tmp_path, capsys):
     ('scenes = ["default"]\n[schemes.kbuffer]\nmode = "peal"\n', "'peal' is not a valid choice (valid: peel, "
                                                                   "sort-blend)"),
     ('scenes = ["default"]\ngpus = ["gtx9999"]\n[schemes.kbuffer]\n', "gpus: 'gtx9999' is not a GPU preset (valid: "
-                                                                      "geforce7900gtx, gtx280, modern)"),
+                                                                      "geforce7900gtx, gtx280, laptop-ampere, modern)"),
     ('scenes = ["default"]\n[schemes.kbuffer]\n[gpu-set]\n"rop.entries" = 4\n',
      "gpu-set: rop.entries: unknown key (valid: units, reorder_entries"),
     ('scenes = ["default"]\n[schemes.kbuffer]\n[gpu-set]\n"rop.units" = [8, 0]\n', "gpu-set: rop.units: must be >= 1"),

@@ -187,11 +187,11 @@ def test_an_empty_gpu_file_is_an_error_naming_it(tmp_path, text):
 
 
 def test_presets_load_and_unknown_preset_lists_valid():
-    for name in ("gtx280", "geforce7900gtx", "modern"):
+    for name in ("gtx280", "geforce7900gtx", "laptop-ampere", "modern"):
         g = load_gpu(name)
         assert g.name == name
     assert load_gpu("gtx280").core.sms == 30 and load_gpu("gtx280").memory.partitions == 8
-    with pytest.raises(ConfigError, match="valid: geforce7900gtx, gtx280, modern"):
+    with pytest.raises(ConfigError, match="valid: geforce7900gtx, gtx280, laptop-ampere, modern"):
         load_gpu("gtx9999")
 
 

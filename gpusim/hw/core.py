@@ -150,6 +150,8 @@ class SimtCore(Unit):
                         now = value
                     f = sm_free[sm]
                     sm_free[sm] = (f if f > now else now) + cyc
+                    if sm_free[sm] > self.last_progress:     # issuing ALU work is progress (the watchdog)
+                        self.last_progress = sm_free[sm]
                     continue
                 if dep and value > now:              # wait for the result it depends on
                     yield timeout(value - now)

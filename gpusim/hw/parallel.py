@@ -26,9 +26,11 @@ import threading
 
 import numpy as np
 
+from gpusim.hw.program import COMPUTE
+
 from gpusim.hw.unit import FP
 
-MIN_INSTRUCTIONS = 50_000     # warp instructions below which auto mode stays serial (a fork costs ~10-50 ms)
+MIN_INSTRUCTIONS = 50_000     # memory warp instructions below which auto mode stays serial (a fork costs ~10-50 ms)
 MAX_SHARE = 0.85              # auto mode stays serial when one pass holds this share of the instructions
 
 
@@ -51,7 +53,9 @@ def plan_shares(machine) -> list[list[int]]:
     auto = workers == 0
     if auto:
         workers = available_cpus()
-    weight = [p.instructions for p in prog.passes]
+    # memory instructions: what the event model spends its time on (ALU work costs no event)
+    weight = [int(np.count_nonzero(prog.wi_unit[int(p.wi_start[0]):int(p.wi_start[-1])] != COMPUTE)) if p.warps
+              else 0 for p in prog.passes]
     busy = [i for i, w in enumerate(weight) if w]
     everything = [list(range(len(prog.passes)))]
     if workers < 2 or len(busy) < 2 or machine.carries_state():
