@@ -18,7 +18,7 @@ from conftest import make_trace
 from gpusim.schemes import make_scheme, scheme_names
 from gpusim.schemes.common.alu import (COMPARE_EXCHANGE, COMPOSITE, DUAL_PEEL_TEST, KEY_COMPARE_EXCHANGE,
                                        LEADING_ZEROS, LEADING_ZEROS_DECODE, PACK_DEPTH_COLOUR, PEEL_TEST,
-                                       PREMULTIPLY, RECIRCULATE_TEST, UNPACK_RGBA8, UNPACK_SPLIT_RGB24,
+                                       PREMULTIPLY, RECIRCULATE_TEST, SHARED_ATOMIC, UNPACK_RGBA8, UNPACK_SPLIT_RGB24,
                                        WBOIT_RESOLVE, WBOIT_WEIGHT, WEIGHT_FACTOR_PAIR, compare_exchange,
                                        weight_factor_work)
 
@@ -153,16 +153,33 @@ def test_weight_factors_compare_each_pair_of_visible_fragments(name):
                                       6: wf[6] + LEADING_ZEROS_DECODE})]
 
 
+def _workgroup_total(entry):
+    """(pass, the ALU work a bin's workgroup lanes share in all, the busiest lane's share)."""
+    p, lanes = entry
+    return p, sum(lanes.values()), max(lanes.values())
+
+
 def test_lucidraster_sorts_each_block_and_filters_each_shaded_sample():
-    # one bin, one 8x8 block holding 6 tri-blocks: a bitonic network on 8 keys, 4 x 3 x 4 / 2 = 24 exchanges
+    # one bin, one 8x8 block holding 6 tri-blocks: a bitonic network on 8 keys, 4 x 3 x 4 / 2 = 24 exchanges,
+    # shared by the low rasterizer's workgroup lanes (one instruction each: fewer than its 256 lanes)
     res = run("lucidraster")
-    assert computes(res) == [(4, {0: 24 * KEY_COMPARE_EXCHANGE}), (4, {0: 6 * (3 * COMPARE_EXCHANGE + COMPOSITE)})]
-    assert computes(run("lucidraster", depth_filter=1))[1] == (4, {0: 6 * (COMPARE_EXCHANGE + COMPOSITE)})
-    # three triangles in each of two half-blocks of one block: the high rasterizer sorts the half-blocks
-    # (two networks on 4 keys, 6 exchanges each), the low one the block (a network on 8 keys)
+    count, write, sort, shade = (_workgroup_total(e) for e in computes(res))
+    # binning: a shared-memory atomic per (bin, triangle) pair (6 here) when counting and again when writing
+    assert count == (1, 6 * SHARED_ATOMIC, SHARED_ATOMIC) and write == (3, 6 * SHARED_ATOMIC, SHARED_ATOMIC)
+    assert sort == (4, 24 * KEY_COMPARE_EXCHANGE, 1)
+    assert shade == (4, 6 * (3 * COMPARE_EXCHANGE + COMPOSITE), 1)
+    assert _workgroup_total(computes(run("lucidraster", depth_filter=1))[3]) == (
+        4, 6 * (COMPARE_EXCHANGE + COMPOSITE), 1)
+    # three triangles in each of two half-blocks of one block: the high rasterizer (pass 5, 1,024 lanes) sorts the
+    # half-blocks (two networks on 4 keys, 6 exchanges each), the low one the block (a network on 8 keys)
     split = make_trace([0, 1, 2, 0, 1, 2], [0, 0, 0, 4, 4, 4], [0.1, 0.2, 0.3, 0.4, 0.5, 0.6], width=8, height=8)
-    assert computes(run("lucidraster", split))[0] == (4, {0: 24 * KEY_COMPARE_EXCHANGE})
-    assert computes(run("lucidraster", split, high_bin_triangles=1))[0] == (4, {0: 12 * KEY_COMPARE_EXCHANGE})
+    assert _workgroup_total(computes(run("lucidraster", split))[2]) == (4, 24 * KEY_COMPARE_EXCHANGE, 1)
+    assert _workgroup_total(computes(run("lucidraster", split, high_bin_triangles=1))[2]) == (
+        5, 12 * KEY_COMPARE_EXCHANGE, 1)
+    # a bin with more work than lanes: each of the 256 lanes takes its ceil share
+    from gpusim.schemes.common.workgroups import Spread
+    sp = Spread(np.array([3]), np.array([256]), 256, 1024)
+    assert sp.threads.min() == 3 * 1024 and len(sp.threads) == 256
 
 
 # access counts of the tiny traces as each scheme reported them before it declared any ALU work

@@ -4,7 +4,15 @@ Stage 1 (setup) stores per-triangle data for every triangle with samples on
 screen; stage 2 (binning) lists, per 32x32 bin, the triangles covering it and
 classifies bins as empty, low (fewer than ``high_bin_triangles`` triangles) or
 high; a low bin with a block of more than ``low_block_triangles`` tri-blocks
-is passed on to the high rasterizer (``promoted``).
+is passed on to the high rasterizer (``promoted``). Binning workgroups take
+batches of ``BINNING_BATCH`` triangles and count them per bin with
+shared-memory atomics; each batch adds its count of a bin to the global counter
+once, and reserves its run of the bin's list once.
+
+Stage 3 runs as two dispatches, ``raster-low`` and ``raster-high``: a
+workgroup per bin (256 and 1,024 threads) whose lanes take the bin's items
+round robin (gpusim.schemes.common.workgroups), the sort and the depth filter
+as ALU work shared by the lanes.
 
 Stage 3, per bin: per 8x8 block, the tri-blocks (a triangle's samples in that
 block) are sorted front to back by the depth at the centroid of their samples,
@@ -52,12 +60,14 @@ from gpusim.config import param
 from gpusim.metrics.composite import composite_runs, runs_by_length
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.common.alu import COMPARE_EXCHANGE, COMPOSITE, KEY_COMPARE_EXCHANGE, bitonic_compares
+from gpusim.schemes.common.alu import (COMPARE_EXCHANGE, COMPOSITE, KEY_COMPARE_EXCHANGE, SHARED_ATOMIC,
+                                       bitonic_compares)
 from gpusim.schemes.common.arrays import rank_in_runs
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.depthkey import depth_key
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.lucid_bins import Grid, grouped, pairs
+from gpusim.schemes.common.workgroups import Spread
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
 TRI_DATA_BYTES = 84          # 4 (normal) + 32 (barycentric edges) + 16 (depth edge, ids) + 32 (scanline)
@@ -66,6 +76,9 @@ TRI_HALF_BLOCK_BYTES = 8     # 24-bit coverage, 24-bit triangle, 12-bit sample p
 LOW_SCRATCH = 4 * 1024 * TRI_BLOCK_ROW_BYTES + 16 * 256 * 2 * TRI_HALF_BLOCK_BYTES   # 128 KiB per workgroup
 HIGH_SCRATCH = 768 * 1024
 SEGMENT = 256                # samples per segment in phase 3
+LOW_WORKGROUP = 256          # threads of a low-rasterizer workgroup (section 2, stage 3)
+BINNING_BATCH = 2048         # triangles per binning batch: a setup chunk of 1,024 quads (section 2, stage 1)
+HIGH_WORKGROUP = 1024        # threads of a high-rasterizer workgroup
 DEPTH_BITS = 22
 TRANSMITTANCE_LIMIT = np.float32(1.0 / 128)   # a pixel is opaque once blended alpha reaches 1 - 1/128
 
@@ -211,7 +224,7 @@ class LucidRaster(Scheme):
         uses_low = bool((~to_high[bins]).any())
         passes = [Pass("setup", "geometry", "entry"), Pass("bin-count", "geometry", "entry"),
                   Pass("bin-offsets", "fullscreen", "entry"), Pass("bin-write", "geometry", "entry"),
-                  Pass("raster", "fullscreen", "entry")]
+                  Pass("raster-low", "fullscreen", "entry"), Pass("raster-high", "fullscreen", "entry")]
         names = ["tri_data", "bin_counts", "bin_offsets", "bin_tri_lists"]
         names += (["scratch_low"] if uses_low else []) + (["scratch_high"] if uses_high else []) + ["framebuffer"]
         plan = OpPlan(passes, names)
@@ -222,11 +235,19 @@ class LucidRaster(Scheme):
         tri_pos = np.cumsum(has_samples) - 1
         # stage 1 and 2 (one thread per triangle, per (bin, triangle) pair, per bin)
         plan.add(0, "store", "tri_data", n_vis, 1, lambda i, s: i * T, T)
-        plan.add(1, "atomic_inc", "bin_counts", len(pb_bin), 1, lambda i, s: pb_bin[i] * 4, 4)
+        # binning: persistent workgroups take batches of BINNING_BATCH triangles, count each (bin, triangle) pair
+        # with a shared-memory atomic, then add each batch's count of a bin to the global counter once; the
+        # write pass reserves each batch's run of a bin's list the same way, then stores the pairs
+        batch_bin, leader = np.unique(pb_tri // BINNING_BATCH * B + pb_bin, return_index=True)
+        plan.compute(1, len(pb_bin), SHARED_ATOMIC)
+        plan.add(1, "atomic_inc", "bin_counts", leader, 1, lambda i, s: batch_bin[i] % B * 4, 4, dep=True)
         plan.add(2, "load", "bin_counts", B, 1, lambda i, s: i * 4, 4)
         plan.add(2, "store", "bin_offsets", B, 1, lambda i, s: i * 4, 4, dep=True)
-        plan.add(3, "store", "bin_tri_lists", len(pb_bin), 1, lambda i, s: i * 4, 4)
-        # stage 3, one thread (workgroup) per non-empty bin
+        plan.compute(3, len(pb_bin), SHARED_ATOMIC)
+        plan.add(3, "atomic_inc", "bin_offsets", leader, 1, lambda i, s: batch_bin[i] % B * 4, 4, dep=True)
+        plan.add(3, "store", "bin_tri_lists", len(pb_bin), 1, lambda i, s: i * 4, 4, dep=True)
+        # stage 3: a workgroup per non-empty bin (low: 256 threads, high: 1024), its lanes taking the bin's
+        # items round robin (gpusim.schemes.common.workgroups); low and high bins run as two dispatches
         first = np.cumsum(bin_tris) - bin_tris
         tbr, tb, thb_tri = counts["tbr"], counts["tb"], counts["thb_tri"]
         thb = np.bincount(counts["thb_bin"], minlength=B)
@@ -235,11 +256,6 @@ class LucidRaster(Scheme):
         cov_bin = grid.bin_of_pixel(covered)
         cov_order, cov_first = grouped(cov_bin, B)
         px = np.bincount(cov_bin, minlength=B)
-        plan.add(4, "load", "bin_offsets", bins, 1, lambda i, s: bins[i] * 4, 4)
-        plan.add(4, "load", "bin_tri_lists", bins, bin_tris[bins], lambda i, s: (first[bins[i]] + s) * 4, 4,
-                 dep=True)
-        plan.add(4, "load", "tri_data", bins, bin_tris[bins],                 # scanline data (last 32 B)
-                 lambda i, s: tri_pos[pb_tri[first[bins[i]] + s]] * T + T - 32, 32, dep=True)
         # phase 2's sorts per bin: each block's tri-blocks (low), each half-block's tri-half-blocks (high)
         sorts = {}
         for name, tris_in, bin_of in (("block", counts["block_tris"], grid.bin_of_block),
@@ -247,29 +263,47 @@ class LucidRaster(Scheme):
             sorts[name] = np.zeros(B, np.int64)
             np.add.at(sorts[name], bin_of(np.arange(len(tris_in))), bitonic_compares(tris_in))
         sort_work = np.where(to_high, sorts["half"], sorts["block"]) * KEY_COMPARE_EXCHANGE
+        shade_work = counts["shaded"] * (self.depth_filter * COMPARE_EXCHANGE + COMPOSITE)
         slot = np.arange(len(bins)) % WG                                      # persistent workgroup of each bin
         overflow = 0
-        for name, size, sel in (("scratch_low", LOW_SCRATCH, ~to_high[bins]), ("scratch_high", HIGH_SCRATCH,
-                                                                              to_high[bins])):
+        for p, name, size, sel, lanes in ((4, "scratch_low", LOW_SCRATCH, ~to_high[bins], LOW_WORKGROUP),
+                                          (5, "scratch_high", HIGH_SCRATCH, to_high[bins], HIGH_WORKGROUP)):
             b, base, half = bins[sel], slot[sel] * size, size // 2
             if len(b) == 0:
                 continue
+
+            def spread(op, structure, count, offset, nbytes, dep=False, b=b, lanes=lanes, p=p):
+                """Bin ``b[i]``'s ``count[i]`` operations ``offset(i, s)``, dealt over its workgroup's lanes."""
+                sp = Spread(b, count, lanes, HIGH_WORKGROUP)
+                plan.add(p, op, structure, sp.threads, sp.counts, lambda i, s: offset(*sp.item(i, s)), nbytes,
+                         dep=dep)
+
+            def work(instructions, b=b, lanes=lanes, p=p):
+                """ALU work of each bin, shared evenly by its workgroup's lanes."""
+                sp = Spread(b, np.minimum(instructions, lanes), lanes, HIGH_WORKGROUP)
+                plan.compute(p, sp.threads, -(-instructions[sp.owner_index] // np.minimum(instructions, lanes)
+                                              [sp.owner_index].clip(1)))
+
             overflow += int(np.count_nonzero((tbr[b] * TRI_BLOCK_ROW_BYTES > half)
                                              | (thb[b] * TRI_HALF_BLOCK_BYTES > half)))
+            spread("load", "bin_offsets", np.ones(len(b), np.int64), lambda i, s, b=b: b[i] * 4, 4)
+            spread("load", "bin_tri_lists", bin_tris[b], lambda i, s, b=b: (first[b[i]] + s) * 4, 4, dep=True)
+            spread("load", "tri_data", bin_tris[b],                               # scanline data (last 32 B)
+                   lambda i, s, b=b: tri_pos[pb_tri[first[b[i]] + s]] * T + T - 32, 32, dep=True)
             rows = lambda i, s, base=base, half=half: base[i] + (s * TRI_BLOCK_ROW_BYTES) % half  # noqa: E731
             halves = lambda i, s, base=base, half=half: (base[i] + half  # noqa: E731
                                                          + (s * TRI_HALF_BLOCK_BYTES) % half)
-            plan.add(4, "store", name, b, tbr[b], rows, TRI_BLOCK_ROW_BYTES)
-            plan.add(4, "load", name, b, tb[b], rows, TRI_BLOCK_ROW_BYTES, dep=True)
-            plan.compute(4, b, sort_work[b])
-            plan.add(4, "store", name, b, thb[b], halves, TRI_HALF_BLOCK_BYTES)
-            plan.add(4, "load", name, b, thb[b], halves, TRI_HALF_BLOCK_BYTES, dep=True)
-        plan.add(4, "load", "tri_data", bins, thb[bins],                       # shading data per tri-half-block
-                 lambda i, s: tri_pos[thb_tri[thb_order[thb_first[bins[i]] + s]]] * T + 4, 32, dep=True)
-        # phase 3: every shaded sample passes the pixel's depth filter and is blended
-        plan.compute(4, bins, counts["shaded"][bins] * (self.depth_filter * COMPARE_EXCHANGE + COMPOSITE))
-        plan.add(4, "store", "framebuffer", bins, px[bins],
-                 lambda i, s: covered[cov_order[cov_first[bins[i]] + s]] * 4, 4, dep=True)
+            spread("store", name, tbr[b], rows, TRI_BLOCK_ROW_BYTES)
+            spread("load", name, tb[b], rows, TRI_BLOCK_ROW_BYTES, dep=True)
+            work(sort_work[b])
+            spread("store", name, thb[b], halves, TRI_HALF_BLOCK_BYTES)
+            spread("load", name, thb[b], halves, TRI_HALF_BLOCK_BYTES, dep=True)
+            spread("load", "tri_data", thb[b],                                    # shading data per tri-half-block
+                   lambda i, s, b=b: tri_pos[thb_tri[thb_order[thb_first[b[i]] + s]]] * T + 4, 32, dep=True)
+            # phase 3: every shaded sample passes the pixel's depth filter and is blended
+            work(shade_work[b])
+            spread("store", "framebuffer", px[b], lambda i, s, b=b: covered[cov_order[cov_first[b[i]] + s]] * 4, 4,
+                   dep=True)
         low_b, high_b = bins[~to_high[bins]], bins[to_high[bins]]
         peak = lambda b: int(np.maximum(tbr[b] * TRI_BLOCK_ROW_BYTES, 0).max(initial=0)  # noqa: E731
                              + (thb[b] * TRI_HALF_BLOCK_BYTES).max(initial=0))

@@ -98,3 +98,7 @@ def weight_factor_work(fragments: np.ndarray) -> np.ndarray:
     weight (``COMPOSITE``)."""
     m = np.asarray(fragments, np.int64)
     return m * (m - 1) // 2 * WEIGHT_FACTOR_PAIR + m * COMPOSITE
+
+#: a shared-memory atomic add (LucidRaster's per-bin counters in a binning workgroup): the counter's
+#: address (2), the atomic itself (1), the test of its result (1)
+SHARED_ATOMIC = 4
