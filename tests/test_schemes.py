@@ -209,6 +209,24 @@ def test_depth_peeling_pass_counts_follow_freepipe_table_3(random_trace):
     exact(ddp, random_trace)
     capped = run("depth-peeling", random_trace, max_passes=3)
     assert capped.geometry_passes == 3 and capped.dropped_fragments > 0
+    # fixed: always max_passes passes, those past the layers peeling nothing (seed 004's multi-pass mode)
+    fixed = run("depth-peeling", random_trace, termination="fixed", max_passes=layers + 5, colour_format="rgba32f")
+    assert fixed.geometry_passes == layers + 5 and fixed.dropped_fragments == 0
+    assert np.array_equal(fixed.image, dp.image)
+    assert fixed.plan.accesses()["peel_depth"]["load"] == len(random_trace) * (layers + 4)
+    with pytest.raises(GpusimError, match="max_passes >= 1"):
+        run("depth-peeling", random_trace, termination="fixed")
+
+
+def test_mdts_depth_only_capture_is_one_pass_and_the_depth_array(random_trace):
+    both = run("freepipe-mdts", random_trace)
+    depth = run("freepipe-mdts", random_trace, colour="none", colour_format="rgba32f")
+    assert (both.geometry_passes, depth.geometry_passes) == (2, 1)
+    assert set(depth.footprint) == {"depth_array", "total"}
+    assert depth.footprint["total"] == depth.footprint["depth_array"] == both.footprint["depth_array"]
+    assert set(depth.plan.accesses()) == {"depth_array"}
+    assert depth.plan.accesses()["depth_array"]["atomic_min"] == both.plan.accesses()["depth_array"]["atomic_min"]
+    exact(depth, random_trace)
 
 
 def test_depth_peeling_loses_equal_depths_dual_peeling_keeps_them():

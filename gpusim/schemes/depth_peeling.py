@@ -22,6 +22,9 @@ is the largest number of distinct depths of a pixel. With ``termination =
 occlusion-query`` depth peeling runs one more pass, the one whose query finds
 no fragment left (dual depth peeling's last pass already finds its inner
 range empty). ``max_passes`` caps the peel passes; deeper layers are dropped.
+With ``termination = fixed`` depth peeling always runs ``max_passes`` passes,
+those past the scene's layers peeling nothing (seed 004 Table 1's multi-pass
+mode, whose time grows with k).
 Accumulation arithmetic is float32; stored layer colours use ``colour_format``.
 
 ALU work beyond each operation's own (gpusim.schemes.common.alu): in every
@@ -41,6 +44,7 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
+from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.common.alu import COMPOSITE, DUAL_PEEL_TEST, PEEL_TEST
@@ -48,7 +52,7 @@ from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
-Termination = Literal["known-layers", "occlusion-query"]
+Termination = Literal["known-layers", "occlusion-query", "fixed"]
 
 
 def _layers(g: PixelGroups) -> np.ndarray:
@@ -65,7 +69,9 @@ class DepthPeeling(Scheme):
     summary = "depth peeling: one geometry pass per layer (Everitt 2001)"
 
     max_passes: int = param(0, unit="passes", doc="cap on peel passes (0: as many as the scene needs)", min=0)
-    termination: Termination = param("known-layers", doc="pass count as FreePipe Table 3, or +1 occlusion-query pass")
+    termination: Termination = param("known-layers", doc="pass count as FreePipe Table 3, +1 occlusion-query "
+                                     "pass, or fixed: always max_passes passes (an application peeling k layers, "
+                                     "seed 004 Table 1's MP)")
     colour_format: ColourFormat = param("rgba8", doc="format of the peeled layer's colour")
 
     def simulate(self, trace) -> SchemeResult:
@@ -74,7 +80,11 @@ class DepthPeeling(Scheme):
         pix, d = g.pix, g.distinct_rank
         lay = _layers(g)
         need = int(lay.max(initial=0))
-        peels = min(need, self.max_passes) if self.max_passes else need
+        if self.termination == "fixed" and not self.max_passes:
+            raise GpusimError("depth-peeling: termination = 'fixed' runs max_passes passes; set max_passes >= 1 "
+                              "(e.g. --param max_passes=4)")
+        peels = self.max_passes if self.termination == "fixed" else min(need, self.max_passes) if self.max_passes \
+            else need
         query = self.termination == "occlusion-query" and peels == need
         total = peels + (1 if query and n else 0)
         passes = []

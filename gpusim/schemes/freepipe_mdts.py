@@ -24,6 +24,11 @@ Colour (the array holds depths only):
   trace's single alpha) is used for every fragment. Colour mismatches (halves
   from different fragments) and order inversions are measured, not assumed.
 
+* ``colour = "none"``: depths only, one geometry pass and no colour array, as
+  a translucency effect that needs only the thickness between layers (seed
+  000 Table 3, whose 20 MB is the depth array alone); the image shows each
+  kept depth's own fragment colour.
+
 Passes: ``clear`` (one store per entry of each array), ``capture``, (``colour``),
 ``resolve`` (one thread per pixel: loads entries until the first empty one,
 then composites them front to back; the array is already in depth order).
@@ -69,6 +74,10 @@ class FreePipeMDTS(Scheme):
     alpha: float | None = param(None, unit="1", doc="constant alpha for packing (default: the trace's single alpha)",
                                 min=0.0, max=1.0)
     colour_format: ColourFormat = param("rgba8", doc="colour_array format without packing")
+    colour: Literal["pass", "none"] = param("pass", doc="without packing, how colour is captured: a second "
+                                            "geometry pass (pass), or not at all (none: depths only, one pass, "
+                                            "as a translucency effect that needs only the thickness between "
+                                            "layers, seed 000 Table 3)")
     layout: Layout = param("pixel-major", doc="entry layout: pixel-major ([x][y][i]) or layer-major")
 
     def simulate(self, trace) -> SchemeResult:
@@ -86,17 +95,19 @@ class FreePipeMDTS(Scheme):
         else:
             values = {"depth_array": g.key}
         cb = 4 if self.packing else COLOUR_BYTES[self.colour_format]
+        depth_only = not self.packing and self.colour == "none"
 
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment", software=True)]
-        if not self.packing:
+        if not self.packing and not depth_only:
             passes.append(Pass("colour", "geometry", "fragment", software=True))
         passes.append(Pass("resolve", "fullscreen", "pixel"))
         resolve_pass = len(passes) - 1
-        structures = ["depth_array", "colour_array"]
+        structures = ["depth_array"] if depth_only else ["depth_array", "colour_array"]
         plan = OpPlan(passes, structures)
         entries = P * L
         plan.add(0, "store", "depth_array", entries, 1, lambda i, s: i * DEPTH_BYTES, DEPTH_BYTES)
-        plan.add(0, "store", "colour_array", entries, 1, lambda i, s: i * cb, cb)
+        if not depth_only:
+            plan.add(0, "store", "colour_array", entries, 1, lambda i, s: i * cb, cb)
 
         kept: dict[str, np.ndarray] = {}
         frags = n
@@ -120,6 +131,9 @@ class FreePipeMDTS(Scheme):
         stats: dict[str, Stat] = {}
         if self.packing:
             order, rgba, stats = self._resolve_packed(trace, g, values, kept, alpha, hi_lo)
+        elif depth_only:                 # the effect shades each layer itself: the image shows its fragment's colour
+            order, rgba = kd, store_colour(trace.rgba[kd], self.colour_format)
+            rgba[trace.opaque[kd], 3] = 1.0
         else:
             order, rgba, stats = self._colour_pass(trace, g, plan, kd)
         res = lambda i, s: entry_index(i, s, L, P, layout)  # noqa: E731
@@ -127,26 +141,29 @@ class FreePipeMDTS(Scheme):
         pixels = P
         plan.add(resolve_pass, "load", "depth_array", pixels, sentinel,
                  lambda i, s: res(i, s) * DEPTH_BYTES, DEPTH_BYTES)
-        plan.add(resolve_pass, "load", "colour_array", pixels, kept_n, lambda i, s: res(i, s) * cb, cb)
+        if not depth_only:
+            plan.add(resolve_pass, "load", "colour_array", pixels, kept_n, lambda i, s: res(i, s) * cb, cb)
         # in registers: unpack each loaded entry's colour and composite it (the array is in depth order)
-        unpack = UNPACK_SPLIT_RGB24 if self.packing else UNPACK_RGBA8 if self.colour_format == "rgba8" else 0
+        unpack = (UNPACK_SPLIT_RGB24 if self.packing else 0 if depth_only
+                  else UNPACK_RGBA8 if self.colour_format == "rgba8" else 0)
         plan.compute(resolve_pass, pixels, kept_n * (COMPOSITE + unpack))
 
         if self.direction == "max":      # entries descend: the resolve reads them back to front
             order, rgba = self._reverse_runs(pix, order, rgba)
         image = composite_image(trace, pix[order], rgba, rgba[:, 3])
         struct = [Structure("depth_array", DEPTH_BYTES, P * L, len(kd),
-                            "32-bit depth per entry" + (" (20-bit depth + 12 colour bits)" if self.packing else "")),
-                  Structure("colour_array", cb, P * L, len(kept["colour_array"]) if self.packing else len(kd),
-                            "20-bit depth + 12 colour bits per entry" if self.packing
-                            else f"{self.colour_format} colour per entry (second pass)")]
+                            "32-bit depth per entry" + (" (20-bit depth + 12 colour bits)" if self.packing else ""))]
+        if not depth_only:
+            struct.append(Structure("colour_array", cb, P * L, len(kept["colour_array"]) if self.packing else len(kd),
+                                    "20-bit depth + 12 colour bits per entry" if self.packing
+                                    else f"{self.colour_format} colour per entry (second pass)"))
         accesses = plan.accesses()
         atomics = int(accesses.get("depth_array", {}).get(atomic, 0))
         stats["atomic_operations"] = Stat(sum(v.get(atomic, 0) for v in accesses.values()), "operations",
                                           f"{atomic} operations in the capture pass (all arrays)")
         stats["depth_chain_atomics"] = Stat(atomics, "operations", f"{atomic} operations on depth_array")
         return SchemeResult(self.name, self.params(), image, n, g.covered, struct, plan,
-                            geometry_passes=1 if self.packing else 2,
+                            geometry_passes=1 if self.packing or depth_only else 2,
                             dropped_fragments=int(n - len(kd)),
                             overflowed_pixels=int(np.count_nonzero(g.count > kept_n)),
                             lists=CapturedLists(pix[order], order), stats=stats)
