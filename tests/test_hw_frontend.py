@@ -155,3 +155,12 @@ def test_alu_work_runs_as_long_as_the_busiest_lane():
     assert cycles == (1 + 100) + 30 + (1 + 100)
     rec = analytic_timing(_Result(plan, bases), work, gpu)
     assert rec["passes"][0]["cycles"] >= 30
+
+
+def test_software_rasterizer_through_an_l2():
+    # the vertex buffers sit above every structure, and their segments must stay addressable on the L2 path
+    # (32-byte segments on `modern`)
+    plan, _, work, _ = _draw(np.arange(40) % 7, np.arange(40) // 2, 64, software=True)
+    gpu = load_gpu("modern", ["driver.pass_us=0"])
+    cycles, m = _run(gpu, work)
+    assert cycles > 0 and m.units["l2"].summary(cycles)["requests"] > 0

@@ -43,8 +43,9 @@ from gpusim.schemes.common.arrays import rank_in_runs
 PRODUCES = frozenset({"load", "rmw_read", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
                       "depth_test", "stencil", "scoreboard"})
 OP_PRODUCES = np.array([o in PRODUCES for o in OPS])
-#: byte addresses of the software rasterizer's index and vertex buffers (above every scheme structure)
-INDEX_BASE, VERTEX_BASE = 1 << 40, 1 << 41
+#: byte addresses of the software rasterizer's index and vertex buffers, above every scheme structure (16 and
+#: 32 GiB) and within the 2^36 segments the memory path's request keys hold
+INDEX_BASE, VERTEX_BASE = 1 << 34, 1 << 35
 
 
 class Workload:
@@ -340,6 +341,9 @@ def lower(work: Workload, gpu, keep=None) -> Program:
     dep_of_group = np.array([gr.dep for gr in plan.groups] or [False], bool)
     wi_op, wi_unit, wi_dep = op_of_group[g], unit_of_group[g], dep_of_group[g]
     if software:                     # each warp of a software-rasterizer pass first loads and sets up its triangles
+        if max(work.bases.values(), default=0) >= INDEX_BASE:
+            raise GpusimError(f"the scheme's structures reach past {INDEX_BASE >> 30} GiB, where the software "
+                              f"rasterizer's vertex buffers sit; use a smaller trace or fewer layers")
         if "coalescer" not in units:
             units += ("coalescer",)
         mem, vb = units.index("coalescer"), 3 * gpu.raster.vertex_bytes
