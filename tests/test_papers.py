@@ -227,7 +227,7 @@ def test_seed004_sp_ratios_within_1_5x():
 
 
 def seed002_results() -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Each look-alike with the NVidia SW/HW, DF costs at the paper's averages and stages 14/5/81%."""
+    """Each look-alike with the NVidia SW/HW, DF costs at the paper's averages and stages 14/5/60/21%."""
     runs, stats = [], []
     for name, scene in paper002.SCENES.items():
         if scene is None:
@@ -238,7 +238,8 @@ def seed002_results() -> tuple[pd.DataFrame, pd.DataFrame]:
                          "cycles": 100 * paper002.SW_HW_NV[name] * cost})
     results = synthetic(runs, width=320, height=166, **{"stat.invalid_share": 0.0})
     for rid in results[(results["variant"] == "lucidraster") & (results["depth_filter"] == 3)]["run"]:
-        for part, cycles in (("setup", 14), ("bin-count", 2), ("bin-write", 3), ("raster", 81)):
+        for part, cycles in (("setup", 14), ("bin-count", 2), ("bin-write", 3), ("raster-low", 60),
+                             ("raster-high", 21)):
             stats.append({"run": rid, "stat": "pass_cycles", "labels": f"pass={part}", "value": cycles})
     return results, pd.DataFrame(stats)
 
@@ -254,14 +255,12 @@ def test_seed002_targets():
     assert (amd.ours, amd.verdict) == ("6 of 7 (86%)", "missed")
     assert rows[("§3 AMD table, Boxes", "LucidRaster SW/HW")].note.startswith("misses")
     assert rows[("§3 AMD table, Conference", "LucidRaster SW/HW")].met is None       # no look-alike
-    for stage in ("setup", "binning"):
+    for stage in ("setup", "binning", "low raster", "high raster"):      # high: 21% against 18%, within 10 points
         assert rows[("§3 NVidia table, averages", f"share of LucidRaster's time in {stage}")].met
-    split = rows[("§3 NVidia table, averages", "share of LucidRaster's time in low raster / high raster")]
-    assert split.ours == "not measured yet" and split.met is None
     for df in (8, 12):
         assert rows[("§4 sorting errors, averages", f"time at DF={df} / time at DF=3, mean over scenes")].met
     overall = rows[("reproduction targets", "targets met")]
-    assert (overall.ours, overall.verdict) == ("6 of 7 (86%)", "missed")
+    assert (overall.ours, overall.verdict) == ("8 of 9 (89%)", "missed")
 
 
 def seed003_results(tfss: float) -> pd.DataFrame:
