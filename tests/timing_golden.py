@@ -16,7 +16,7 @@ from pathlib import Path
 
 FIXTURE = Path(__file__).with_name("fixtures") / "timing_golden.json"
 SCENES = ("nested-spheres", "default")
-SIZE = 128
+SIZE = 96
 GPUS = ("gtx280", "geforce7900gtx", "modern")
 LEVELS = ("analytic", "sampled", "full")
 #: every registered scheme at its defaults, and the variants that reach the other units

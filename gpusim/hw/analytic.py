@@ -52,6 +52,37 @@ def distinct_quads(prim: np.ndarray, pixel: np.ndarray, width: int, height: int)
     return len(np.unique(quad_ids(prim, pixel, width, height)))
 
 
+def _lane_keys(parts: list) -> np.ndarray:
+    """The sorted distinct lane keys of a pass from each group's (sorted, distinct) keys: the first when every
+    group runs on the same threads, as a pass's groups usually do, else their union (a mask, no sort)."""
+    if not parts:
+        return np.zeros(0, np.int64)
+    first = parts[0]
+    if all(p is first or (len(p) == len(first) and np.array_equal(p, first)) for p in parts[1:]):
+        return first
+    lo = min(int(p[0]) for p in parts if len(p))
+    mask = np.zeros(max(int(p[-1]) for p in parts if len(p)) + 1 - lo, bool)
+    for p in parts:
+        mask[p - lo] = True
+    return np.flatnonzero(mask) + lo
+
+
+class _QuadMemo:
+    """Quads of a pass's fragments, computed once per distinct set of fragments (depth peeling's thousands of
+    passes run over the same ones)."""
+
+    def __init__(self):
+        self.seen: dict[tuple, int] = {}
+
+    def quads(self, keys: np.ndarray, work) -> int:
+        fingerprint = (len(keys), int(keys[0]), int(keys[-1]), int(keys.sum()), int((keys * keys).sum()))
+        got = self.seen.get(fingerprint)
+        if got is None:
+            got = self.seen[fingerprint] = distinct_quads(work.frag_prim[keys], work.frag_pixel[keys], work.width,
+                                                          work.height)
+        return got
+
+
 def _distinct(a: np.ndarray) -> int:
     """How many distinct values (no sort when ``a`` is already sorted, as a warp's lanes usually are)."""
     if len(a) > 1 and not (a[1:] >= a[:-1]).all():
@@ -138,6 +169,7 @@ def analytic_timing(result, work, gpu) -> dict:
             groups_of_pass[p].append(gi)
     passes, total = [], 0
     overhead = pass_overhead_cycles(gpu)      # the driver issues each pass
+    quad_memo = _QuadMemo()                   # passes over the same fragments (depth peeling's) share their quads
     for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
         if pk.kind == "flush":
             cyc = flush_cycles(c, -(-work.width * work.height // ws)) + overhead
@@ -262,10 +294,10 @@ def analytic_timing(result, work, gpu) -> dict:
             "rop": float(rop_unit[p].max()),
         }
         mapping = thread_mapping(gpu, pk)
-        keys = np.unique(np.concatenate(pass_keys)) if pass_keys else np.zeros(0, np.int64)
+        keys = _lane_keys(pass_keys) if mapping in ("fragment", "triangle") else np.zeros(0, np.int64)
         if mapping == "fragment" and len(keys):
             # the front end sees every triangle; the pixel shader runs 4 lanes per 2x2 quad (helper lanes)
-            quads = distinct_quads(work.frag_prim[keys], work.frag_pixel[keys], work.width, work.height)
+            quads = quad_memo.quads(keys, work)
             bounds["issue"] *= max(1.0, 4 * quads / len(keys))
             bounds["raster"] = max(submitted_triangles(pk, work) * per_triangle_cycles(gpu),
                                    quads / gpu.raster.quads_per_cycle)
