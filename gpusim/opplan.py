@@ -186,15 +186,8 @@ class OpPlan:
             raise ValueError(f"unknown operation {op!r}")
         if structure not in self.structures:
             raise ValueError(f"operation on unallocated structure {structure!r}")
-        if isinstance(thread, (int, np.integer)):       # threads 0..thread-1, made only on expansion
-            thread = ThreadRange(int(thread))
-        else:
-            thread = np.asarray(thread, dtype=np.int64)
+        pass_index, thread = self._threads(pass_index, thread)
         count = np.broadcast_to(np.asarray(count, dtype=np.int64), (len(thread),))
-        if not np.isscalar(pass_index):
-            pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), (len(thread),))
-        if len(thread) and not (0 <= np.min(pass_index) and np.max(pass_index) < len(self.passes)):
-            raise ValueError(f"pass index out of range 0..{len(self.passes) - 1}")
         if len(thread) and int(count.sum()) > 0:
             if seq_pass is not None:
                 seq_pass = np.asarray(seq_pass, np.int64)
@@ -203,21 +196,29 @@ class OpPlan:
             self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep, pass_fn,
                                        seq_pass))
 
+    def _threads(self, pass_index, thread):
+        """A group's pass index (one, or one per thread) and threads (an array, or n for 0..n-1, made only on
+        expansion), checked against the plan's passes."""
+        if isinstance(thread, (int, np.integer)):
+            thread = ThreadRange(int(thread))
+        else:
+            thread = np.asarray(thread, dtype=np.int64)
+        if not np.isscalar(pass_index):
+            pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), (len(thread),))
+        if len(thread) and not (0 <= np.min(pass_index) and np.max(pass_index) < len(self.passes)):
+            raise ValueError(f"pass index out of range 0..{len(self.passes) - 1}")
+        return pass_index, thread
+
     def compute(self, pass_index, thread, instructions, dep: bool = True) -> None:
         """Append ALU work in program order: thread ``thread[i]`` runs ``instructions[i]`` instructions (a
         register sort, compositing). ``dep``: the work uses the result of the thread's previous operation (it
         waits for it). No memory operation: access counts and the OpStream leave it out; the timing model
         issues it on the SM (a warp runs as long as its busiest lane)."""
-        if isinstance(thread, (int, np.integer)):
-            thread = ThreadRange(int(thread))
-        else:
-            thread = np.asarray(thread, dtype=np.int64)
+        pass_index, thread = self._threads(pass_index, thread)
         n = len(thread)
         instructions = np.broadcast_to(np.asarray(instructions, dtype=np.int64), (n,))
         if n and int(instructions.min()) < 0:
             raise ValueError("instructions must be >= 0")
-        if not np.isscalar(pass_index):
-            pass_index = np.broadcast_to(np.asarray(pass_index, dtype=np.int64), (n,))
         if n and int(instructions.max()) > 0:
             self.groups.append(OpGroup(pass_index, COMPUTE_OP, "", thread, np.ones(n, np.int64),
                                        lambda i, s: np.zeros(len(i), np.int64), 0, dep, instructions=instructions))

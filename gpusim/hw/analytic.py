@@ -39,17 +39,12 @@ from gpusim.hw.core import SimtCore, flush_cycles
 from gpusim.hw.driver import pass_overhead_cycles
 from gpusim.hw.lower import PRODUCES, split_by, submitted_triangles, thread_mapping
 from gpusim.hw.memory import SECTOR
-from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, per_triangle_cycles, quad_ids
+from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_triangle_cycles
 from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
 
 # the units an operation goes to from the core (analytic estimates report memory traffic as DRAM's)
 MEM, ATOMIC, ROP, SCOREBOARD = "coalescer", "atomic", "rop", "scoreboard"
-
-
-def distinct_quads(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> int:
-    """How many 2x2 quads the fragments (triangle ``prim``, ``pixel``) fill."""
-    return len(np.unique(quad_ids(prim, pixel, width, height)))
 
 
 def _lane_keys(parts: list) -> np.ndarray:

@@ -246,7 +246,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                 present[:] = True
             else:
                 share = ops / max(1, int(totals[p]))
-                present |= _hashed(np.arange(universe), share)
+                present |= hashed(np.arange(universe), int(share * 2**32))
         lane_keys = np.flatnonzero(present) + key_lo
         n_lanes = len(lane_keys)
         # each key's lane rank (None: the key is its rank)
@@ -266,7 +266,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             first_lane = np.searchsorted(warp_of_lane, np.arange(int(warp_of_lane[-1]) + 1))
             lane_in_warp = np.arange(n_lanes) - first_lane[warp_of_lane]
         else:
-            lane_in_warp = None
+            first_lane, lane_in_warp = np.arange(0, n_lanes, ws), None
         n_warps = int(warp_of_lane[-1]) + 1 if warp_of_lane is not None else -(-n_lanes // ws)
         # triangle mapping: iteration j of a lane's loop is its triangle's j-th fragment (in thread order)
         j_of = None
@@ -280,7 +280,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             bbox = bbox_pixels(prim - key_lo, work.frag_pixel[fr], work.width, universe)[lane_keys - key_lo]
             r = gpu.raster
             setup_cycles = (r.setup_instructions + r.pixel_instructions
-                            * np.maximum.reduceat(bbox, np.arange(0, n_lanes, ws))) * gpu.core.issue_cycles
+                            * np.maximum.reduceat(bbox, first_lane)) * gpu.core.issue_cycles
             software.append((p, np.arange(warp0, warp0 + n_warps), setup_cycles, lane_keys))
             order = np.argsort(prim, kind="stable")
             sp = prim[order]
@@ -318,8 +318,6 @@ def lower(work: Workload, gpu, keep=None) -> Program:
             row_at[unit] = at + n
         pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, warp0, operations=ops, operations_total=int(totals[p]))
         if mode == "fragment":           # the front end feeds the warps in triangle order
-            first_lane = (np.arange(0, n_lanes, ws) if warp_of_lane is None
-                          else np.searchsorted(warp_of_lane, np.arange(n_warps)))
             pp.triangles, position = _raster_positions(work, pk, lane_keys)
             pp.warp_triangles = np.maximum.reduceat(position, first_lane)
             if quads is None:
@@ -456,9 +454,10 @@ def _quads_so_far(work: Workload, lane_keys: np.ndarray) -> np.ndarray:
     return np.cumsum(first)
 
 
-def _hashed(values: np.ndarray, share: float) -> np.ndarray:
-    """A deterministic pseudo-random ``share`` of ``values`` (a multiplicative hash below a threshold)."""
-    return ((values * 2654435761) & 0xFFFFFFFF) < int(share * 2**32)
+def hashed(values: np.ndarray, below: int, seed: int = 0) -> np.ndarray:
+    """A deterministic pseudo-random subset of integer ``values``: those whose 32-bit multiplicative hash is
+    under ``below`` (``share * 2**32`` keeps about that share)."""
+    return ((values * 2654435761 + seed * 97) & 0xFFFFFFFF) < below
 
 
 def submitted_triangles(pk, work: Workload) -> int:

@@ -28,11 +28,10 @@ threads instead, one thread per submitted triangle (triangles that cover no
 pixel included): each thread loads its triangle's indices (``INDEX_BYTES``,
 FreePipe's int4 texel), then its three vertices (``3 x vertex_bytes``, laid
 out per triangle: the texture cache's re-use of shared vertices is not
-modelled), runs
-``setup_instructions`` (transform, clipping, culling and edge setup), then
-tests every pixel of its triangle's bounding box (``pixel_instructions`` each)
-and issues its fragments' operations (gpusim.hw.lower). A warp lasts as long
-as its longest thread.
+modelled), runs ``setup_instructions`` (transform, clipping, culling and edge
+setup), then tests every pixel of its triangle's bounding box
+(``pixel_instructions`` each) and issues its fragments' operations
+(gpusim.hw.lower). A warp lasts as long as its longest thread.
 """
 
 from __future__ import annotations
@@ -92,6 +91,11 @@ def quad_ids(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> np
     return np.asarray(prim, np.int64) * (qw * qh) + (pixel // width // 2) * qw + (pixel % width) // 2
 
 
+def distinct_quads(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> int:
+    """How many 2x2 quads the fragments (triangle ``prim``, ``pixel``) fill."""
+    return len(np.unique(quad_ids(prim, pixel, width, height)))
+
+
 def bbox_pixels(prim: np.ndarray, pixel: np.ndarray, width: int, triangles: int) -> np.ndarray:
     """Per triangle ``0..triangles-1``, the pixels of its fragments' bounding box (at least 1: a triangle that
     covers no pixel centre still tests the pixel its bounding box rounds to)."""
@@ -126,7 +130,7 @@ class Rasterizer(Unit):
         super().__init__(1)
         prog = machine.program
         # a sampled run submits its share of the triangles: the per-triangle stages get that much faster
-        self.per_triangle = per_triangle_cycles(machine.gpu) * getattr(prog, "triangle_share", 1.0)
+        self.per_triangle = per_triangle_cycles(machine.gpu) * prog.triangle_share
         self.quad_rate = config.quads_per_cycle
         fe = [p for p in prog.passes if p.warp_triangles is not None]
         self.requests = [sum(p.triangles for p in fe)]

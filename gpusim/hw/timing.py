@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from gpusim.hw.hazards import count_hazards, rmw_windows
-from gpusim.hw.lower import Workload, lower
+from gpusim.hw.lower import Workload, hashed, lower
 from gpusim.hw.machine import Machine
 from gpusim.hw.program import Program
 from gpusim.hw.thesis import thesis_timing
@@ -118,17 +118,14 @@ def tile_sample(work: Workload, gpu, halve: bool = False):
     chosen[picked] = True
     threshold = int(c.fraction * 2**32) // (2 if halve else 1)
 
-    def hashed(values, below):
-        return ((values * 2654435761 + c.seed * 97) & 0xFFFFFFFF) < below
-
     def keep(p: int, threads: np.ndarray) -> np.ndarray:
         kind = plan.passes[p].threads
         if kind in ("fragment", "pixel"):
             mask = chosen[tile_of(work.frag_pixel[threads] if kind == "fragment" else threads)]
             if halve and not split_tiles:          # a single tile: half of its threads
-                mask &= hashed(threads, 1 << 31)
+                mask &= hashed(threads, 1 << 31, c.seed)
             return mask
-        return hashed(threads // gpu.core.warp_size, threshold)
+        return hashed(threads // gpu.core.warp_size, threshold, c.seed)
 
     return keep, {"tiles": int(len(tiles)), "tiles_sampled": int(len(picked)), "tile": c.tile, "seed": c.seed,
                   "fraction": c.fraction}

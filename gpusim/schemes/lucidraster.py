@@ -280,9 +280,9 @@ class LucidRaster(Scheme):
 
             def work(instructions, b=b, lanes=lanes, p=p):
                 """ALU work of each bin, shared evenly by its workgroup's lanes."""
-                sp = Spread(b, np.minimum(instructions, lanes), lanes, HIGH_WORKGROUP)
-                plan.compute(p, sp.threads, -(-instructions[sp.owner_index] // np.minimum(instructions, lanes)
-                                              [sp.owner_index].clip(1)))
+                used = np.minimum(instructions, lanes)            # lanes with work: one share each
+                sp = Spread(b, used, lanes, HIGH_WORKGROUP)
+                plan.compute(p, sp.threads, (-(-instructions // np.maximum(used, 1)))[sp.owner_index])
 
             overflow += int(np.count_nonzero((tbr[b] * TRI_BLOCK_ROW_BYTES > half)
                                              | (thb[b] * TRI_HALF_BLOCK_BYTES > half)))
