@@ -9,15 +9,25 @@ from gpusim.trace import FragmentTrace
 
 def describe(trace: FragmentTrace) -> dict:
     """Fragments, covered pixels, depth complexity (max, mean over covered pixels,
-    histogram {fragments per pixel: pixels}) and the transparent share."""
+    histogram {fragments per pixel: pixels}) and the transparent share.
+
+    ``primitives`` counts the primitives with at least one fragment; ``primitives_submitted`` the
+    triangles the scene sent to the rasterizer (the trace's metadata; None when it does not say), which
+    includes those that made no fragment: culled, clipped away, off screen, or too thin to cover a pixel
+    centre."""
     counts = trace.depth_complexity().ravel()
     covered = counts[counts > 0]
     hist = np.bincount(covered) if covered.size else np.zeros(1, np.int64)
     n = len(trace)
     transparent = int(n - np.count_nonzero(trace.opaque))
+    drawn = int(np.unique(trace.prim).size) if n else 0
+    submitted = trace.meta.get("primitives")
+    if not isinstance(submitted, int) or isinstance(submitted, bool) or submitted < drawn:
+        submitted = None                 # a CSV import or a trace from elsewhere: only the fragments tell
     return {
         "width": trace.width, "height": trace.height, "fragments": n,
-        "primitives": int(np.unique(trace.prim).size) if n else 0,
+        "primitives": drawn,
+        "primitives_submitted": submitted,
         "covered_pixels": int(covered.size),
         "covered_share": covered.size / trace.pixel_count,
         "depth_complexity": {

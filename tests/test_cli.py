@@ -30,8 +30,13 @@ def test_trace_info_show_pipeline(tmp_path, capsys):
     assert code == 0 and info["fragments"] == len(t)
     assert info["depth_complexity"]["max"] == int(t.depth_complexity().max())
     assert sum(info["depth_complexity"]["histogram"].values()) == info["covered_pixels"]
+    # primitives with fragments, and those the scene submitted (the rest fell between pixel centres or off screen)
+    assert info["primitives"] == len(np.unique(t.prim)) and info["primitives_submitted"] == t.meta["primitives"]
+    assert info["primitives_submitted"] > info["primitives"]
     code, text, _ = run(capsys, "info", str(out))
     assert code == 0 and "depth        max" in text
+    missing = info["primitives_submitted"] - info["primitives"]
+    assert f"primitives   {info['primitives_submitted']:,} submitted; {missing:,} made no fragment" in text
     code, _, _ = run(capsys, "show", str(out), "-o", str(tmp_path / "png"))
     assert code == 0
     from matplotlib import image as mpimg
@@ -45,6 +50,10 @@ def test_csv_import_through_cli(tmp_path, capsys):
     csv.write_text("x,y,z,r,g,b,a\n0,0,0.5,1,0,0,0.5\n1,1,0.2,0,1,0,1\n")
     code, _, _ = run(capsys, "trace", "--from-csv", str(csv), "--size", "4x4", "-o", str(tmp_path / "c.npz"))
     assert code == 0 and len(load_trace(tmp_path / "c.npz")) == 2
+    code, text, _ = run(capsys, "info", str(tmp_path / "c.npz"), "--json")
+    assert code == 0 and json.loads(text)["primitives_submitted"] is None     # a CSV does not say
+    code, text, _ = run(capsys, "info", str(tmp_path / "c.npz"))
+    assert code == 0 and "submitted" not in text
 
 
 @pytest.mark.parametrize("argv, expect", [
@@ -95,10 +104,13 @@ def test_console_script_runs_and_nan_depth_csv_is_rejected(tmp_path):
 def test_existing_output_survives_a_failed_run(tmp_path, capsys):
     out = tmp_path / "keep.npz"
     run(capsys, "trace", "coplanar", "-o", str(out), "--no-progress")
-    before = out.read_bytes()
+    before, trace = out.read_bytes(), load_trace(out)
     code, _, _ = run(capsys, "trace", "coplanar", "--set", "objects.0.alpha=7", "-o", str(out))
     assert code == 2 and out.read_bytes() == before
-    np.testing.assert_array_equal(load_trace(out).x, load_trace(out).x)
+    after = load_trace(out)                            # still the first run's trace, and it loads
+    assert len(after) == len(trace) > 0
+    for column in ("x", "y", "z", "rgba", "prim", "opaque"):
+        np.testing.assert_array_equal(getattr(after, column), getattr(trace, column))
 
 
 def test_sigterm_during_trace_leaves_no_partial_file(tmp_path):

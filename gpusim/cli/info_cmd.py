@@ -25,6 +25,10 @@ def run(args) -> int:
     print(f"trace        {args.trace} (scene: {scene})")
     print(f"screen       {info['width']}x{info['height']} pixels")
     print(f"fragments    {info['fragments']:,} from {info['primitives']:,} primitives")
+    submitted = info["primitives_submitted"]
+    if submitted is not None:
+        print(f"primitives   {submitted:,} submitted; {submitted - info['primitives']:,} made no fragment (culled, "
+              "clipped, off screen or between pixel centres)")
     print(f"transparent  {info['transparent_fragments']:,} ({100 * info['transparent_share']:.1f}%)")
     print(f"covered      {info['covered_pixels']:,} pixels ({100 * info['covered_share']:.1f}% of the screen)")
     print(f"depth        max {dc['max']}, mean {dc['mean']:.2f} fragments per covered pixel")
