@@ -29,6 +29,7 @@ _CLIP_PLANES = np.array([
 ], dtype=np.float64)
 _SCREEN_PLANES = np.array([[1, 0, 0, 1], [-1, 0, 0, 1], [0, 1, 0, 1], [0, -1, 0, 1]], dtype=np.float64)
 _ALL_PLANES = np.concatenate([_CLIP_PLANES, _SCREEN_PLANES])
+assert all(np.count_nonzero(p[:3]) == 1 and np.abs(p[:3]).sum() == 1 and p[3] > 0 for p in _ALL_PLANES)
 _CLIP = np.arange(len(_CLIP_PLANES))                    # planes that force clipping
 _REJECT = np.array([0, 1, *range(len(_CLIP_PLANES), len(_ALL_PLANES))])  # near, far, screen
 
@@ -55,13 +56,33 @@ def _clip_polygon(verts: np.ndarray, attrs: np.ndarray) -> tuple[np.ndarray, np.
     return verts, attrs
 
 
+def _outside(clip: np.ndarray) -> np.ndarray:
+    """(T, 3, planes) bool: vertex outside each of _ALL_PLANES (plane . v < 0).
+
+    Every plane is s * coordinate + m * w with s = +-1 and m a power of two, so
+    plane . v < 0 holds exactly when coordinate < -m*w (s = 1) or > m*w (s = -1):
+    a comparison, with no rounded sum and no matrix product (whose threads cost more
+    than the work).
+    """
+    out = np.empty(clip.shape[:2] + (len(_ALL_PLANES),), dtype=bool)
+    scaled_w = {}
+    for k, plane in enumerate(_ALL_PLANES):
+        axis = int(np.flatnonzero(plane[:3])[0])
+        m = float(plane[3])
+        if m not in scaled_w:
+            scaled_w[m] = clip[..., 3] * m
+        if plane[axis] > 0:
+            np.less(clip[..., axis], np.negative(scaled_w[m]), out=out[..., k])
+        else:
+            np.greater(clip[..., axis], scaled_w[m], out=out[..., k])
+    return out
+
+
 def clip_triangles(batch: TriangleBatch) -> TriangleBatch:
     """Drop invisible triangles and clip crossing ones; submission order is kept."""
     if len(batch) == 0:
         return batch
-    t = len(batch)
-    # one 2-D product for all vertices and planes (batched 3x4 products are slow in numpy)
-    outside = (batch.clip.reshape(-1, 4) @ _ALL_PLANES.T < 0).reshape(t, 3, -1)
+    outside = _outside(batch.clip)
     visible = ~(outside[:, 0] & outside[:, 1] & outside[:, 2])[:, _REJECT].any(axis=1)
     crossing = visible & (outside[:, 0] | outside[:, 1] | outside[:, 2])[:, _CLIP].any(axis=1)
     if not crossing.any():

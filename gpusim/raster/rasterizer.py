@@ -43,109 +43,124 @@ from gpusim.trace import DTYPES, MAX_SCREEN_SIDE, FragmentTrace
 SUBPIXEL_BITS = 8
 _ONE = 1 << SUBPIXEL_BITS        # one pixel in fixed point
 _HALF = _ONE // 2                # pixel-centre offset
-_ROWS_PER_CHUNK = 1 << 21
-_FRAGMENTS_PER_CHUNK = 1 << 21
+_ROWS_PER_CHUNK = 1 << 16
+_FRAGMENTS_PER_CHUNK = 1 << 14
 
 
 class _Setup:
-    """Per-triangle fixed-point edge equations, bounding boxes and attribute planes."""
+    """Per-triangle fixed-point edge equations, bounding boxes and attribute planes.
+
+    Per-vertex, per-edge and per-attribute arrays are laid out (3, T) and (6, T),
+    so that every step below is one contiguous numpy operation over all triangles.
+    """
 
     def __init__(self, batch: TriangleBatch, width: int, height: int, cull: str):
         clip = batch.clip
-        inv_w = 1.0 / clip[..., 3]
-        fx = np.rint((clip[..., 0] * inv_w + 1.0) * (width / 2.0 * _ONE)).astype(np.int64)
-        fy = np.rint((clip[..., 1] * inv_w + 1.0) * (height / 2.0 * _ONE)).astype(np.int64)
-        x0, x1, x2 = fx[:, 0], fx[:, 1], fx[:, 2]
-        y0, y1, y2 = fy[:, 0], fy[:, 1], fy[:, 2]
-        area2 = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+        inv_w = 1.0 / clip[:, :, 3].T                                           # (3, T)
+        fx = np.rint((clip[:, :, 0].T * inv_w + 1.0) * (width / 2.0 * _ONE)).astype(np.int64)
+        fy = np.rint((clip[:, :, 1].T * inv_w + 1.0) * (height / 2.0 * _ONE)).astype(np.int64)
+        area2 = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fx[2] - fx[0]) * (fy[1] - fy[0])
         keep = area2 != 0
         if cull == "back":
             keep &= area2 > 0
         elif cull == "front":
             keep &= area2 < 0
-        # pixel bounding box of the covered samples, clamped to the screen
-        bx0 = np.maximum((np.minimum(np.minimum(x0, x1), x2) - _HALF + _ONE - 1) // _ONE, 0)
-        bx1 = np.minimum((np.maximum(np.maximum(x0, x1), x2) - _HALF) // _ONE, width - 1)
-        by0 = np.maximum((np.minimum(np.minimum(y0, y1), y2) - _HALF + _ONE - 1) // _ONE, 0)
-        by1 = np.minimum((np.maximum(np.maximum(y0, y1), y2) - _HALF) // _ONE, height - 1)
+        # pixel bounding box of the covered samples, clamped to the screen (>> is floor division)
+        bx0 = np.maximum((fx.min(axis=0) - _HALF + _ONE - 1) >> SUBPIXEL_BITS, 0)
+        bx1 = np.minimum((fx.max(axis=0) - _HALF) >> SUBPIXEL_BITS, width - 1)
+        by0 = np.maximum((fy.min(axis=0) - _HALF + _ONE - 1) >> SUBPIXEL_BITS, 0)
+        by1 = np.minimum((fy.max(axis=0) - _HALF) >> SUBPIXEL_BITS, height - 1)
         keep &= (bx0 <= bx1) & (by0 <= by1)
         sel = np.flatnonzero(keep)
         self.count = len(sel)
-        self.prim, self.opaque = batch.prim[sel], batch.opaque[sel]
-        self.x0, self.x1, self.y0, self.y1 = bx0[sel], bx1[sel], by0[sel], by1[sel]
-        fx, fy, inv_w = fx[sel], fy[sel], inv_w[sel]
-        z = (clip[sel, :, 2] * inv_w + 1.0) * 0.5
-        rgba = batch.rgba[sel]
+        if self.count < len(keep):
+            bx0, bx1, by0, by1, area2 = bx0[sel], bx1[sel], by0[sel], by1[sel], area2[sel]
+            fx, fy, inv_w = fx[:, sel], fy[:, sel], inv_w[:, sel]
+            clip, rgba = clip[sel], batch.rgba[sel]
+            self.prim, self.opaque = batch.prim[sel], batch.opaque[sel]
+        else:
+            rgba, self.prim, self.opaque = batch.rgba, batch.prim, batch.opaque
+        self.x0, self.x1, self.y0, self.y1 = bx0, bx1, by0, by1
+        # z, 1/w and rgba/w at each vertex, (6, 3, T)
+        attrs = np.empty((6, 3, self.count))
+        np.multiply(clip[:, :, 2].T, inv_w, out=attrs[0])
+        attrs[0] += 1.0
+        attrs[0] *= 0.5
+        attrs[1] = inv_w
+        np.multiply(rgba.transpose(2, 1, 0), inv_w, out=attrs[2:])
         # make every kept triangle counter-clockwise by swapping vertices 1 and 2
-        flip = np.flatnonzero(area2[sel] < 0)
-        for arr in (fx, fy, z, inv_w, rgba):
-            arr[flip, 1], arr[flip, 2] = arr[flip, 2], arr[flip, 1].copy()
-        area2 = np.abs(area2[sel])
-        # edge k runs from vertex (k+1)%3 to (k+2)%3 and is opposite vertex k
-        i, j = np.array([1, 2, 0]), np.array([2, 0, 1])
-        self.ea = fy[:, i] - fy[:, j]                     # A_k = -(Yj - Yi)
-        self.eb = fx[:, j] - fx[:, i]                     # B_k = Xj - Xi
-        top_left = (self.ea > 0) | ((self.ea == 0) & (self.eb > 0))
-        self.ebias = np.where(top_left, 0, -1)
-        self.ex, self.ey = fx[:, i], fy[:, i]
-        self.planes = self._attribute_planes(fx, fy, area2, z, inv_w, rgba)
+        flip = area2 < 0
+        if flip.any():
+            for arr in (fx, fy, attrs):
+                v1 = arr[..., 1, :].copy()
+                np.copyto(arr[..., 1, :], arr[..., 2, :], where=flip)
+                np.copyto(arr[..., 2, :], v1, where=flip)
+        area2 = np.abs(area2)
+        # edge k runs from vertex (k+1)%3 to (k+2)%3 and is opposite vertex k; a sample at
+        # fixed-point (X, Y) is inside edge k when ea*(X - ex) + eb*(Y - ey) + ebias >= 0
+        i, j = [1, 2, 0], [2, 0, 1]
+        ea = fy[i] - fy[j]                                    # A_k = -(Yj - Yi)
+        eb = fx[j] - fx[i]                                    # B_k = Xj - Xi
+        ebias = np.where((ea > 0) | ((ea == 0) & (eb > 0)), 0, -1)   # top-left rule
+        # per row Y: value at pixel x is kk + ea*_ONE*x, kk = ec + eb*Y (exact in int64)
+        self.ea, self.eb = ea, eb
+        self.ec = ea * (_HALF - fx[i]) - eb * fy[i] + ebias
+        self.planes = self._attribute_planes(fx, fy, area2, attrs)
 
     @staticmethod
-    def _attribute_planes(fx, fy, area2, z, inv_w, rgba) -> tuple[np.ndarray, np.ndarray]:
-        """Planes a0 + dadx*(x-x0) + dady*(y-y0) (pixel units) for z, 1/w and rgba/w, (T, 6, 3),
-        and each triangle's vertex-0 position (x0, y0), (T, 2)."""
+    def _attribute_planes(fx, fy, area2, attrs) -> tuple[np.ndarray, ...]:
+        """Planes a0 + dadx*(x-x0) + dady*(y-y0) (pixel units) for z, 1/w and rgba/w: one (18, T)
+        table of dadx, a0 and dady (6 rows each), and each triangle's vertex 0 (x0, y0), each (T,)."""
         px, py = fx / _ONE, fy / _ONE
-        attrs = np.concatenate([z[..., None], inv_w[..., None], rgba * inv_w[..., None]], axis=2)  # (T,3,6)
         d1, d2 = attrs[:, 1] - attrs[:, 0], attrs[:, 2] - attrs[:, 0]
-        x10, x20 = (px[:, 1] - px[:, 0])[:, None], (px[:, 2] - px[:, 0])[:, None]
-        y10, y20 = (py[:, 1] - py[:, 0])[:, None], (py[:, 2] - py[:, 0])[:, None]
-        area = (area2 / (_ONE * _ONE))[:, None]
-        dadx = (d1 * y20 - d2 * y10) / area
-        dady = (d2 * x10 - d1 * x20) / area
-        planes = np.stack([attrs[:, 0], dadx, dady], axis=2)       # (T, 6, 3)
-        origin = np.stack([px[:, 0], py[:, 0]], axis=1)
-        return planes, origin
-
-    def spans(self, tri: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """First covered pixel and span length of pixel row ``py`` of triangles ``tri``."""
-        ys = py.astype(np.int64) * _ONE + _HALF
-        lo = self.x0[tri].copy()
-        hi = self.x1[tri].copy()
-        empty = np.zeros(len(tri), dtype=bool)
-        for k in range(3):
-            a = self.ea[tri, k]
-            kk = a * (_HALF - self.ex[tri, k]) + self.eb[tri, k] * (ys - self.ey[tri, k]) + self.ebias[tri, k]
-            pos, neg = a > 0, a < 0
-            step = a * _ONE
-            safe = np.where(a == 0, 1, step)
-            lo = np.where(pos, np.maximum(lo, -(kk // safe)), lo)
-            hi = np.where(neg, np.minimum(hi, kk // -safe), hi)
-            empty |= (a == 0) & (kk < 0)
-        length = np.where(empty, 0, np.maximum(hi - lo + 1, 0))
-        return lo, length
+        x10, x20 = px[1] - px[0], px[2] - px[0]
+        y10, y20 = py[1] - py[0], py[2] - py[0]
+        area = area2 / (_ONE * _ONE)
+        dadx = d1 * y20
+        dadx -= d2 * y10
+        dadx /= area
+        dady = d2 * x10
+        dady -= d1 * x20
+        dady /= area
+        return np.concatenate([dadx, attrs[:, 0], dady]), px[0], py[0]
 
 
 def _row_spans(setup: _Setup):
     """All non-empty (triangle, row, first x, length) spans, in emission order."""
     nrows = setup.y1 - setup.y0 + 1
+    cum = np.cumsum(nrows)
+    y_off = setup.y0 - (cum - nrows)          # py = y_off + global row index
+    ea = setup.ea
+    div = np.where(ea == 0, 1, np.abs(ea) * _ONE)
+    pos, neg = ea > 0, ea < 0
     out_tri, out_y, out_lo, out_len = [], [], [], []
     start = 0
-    cum = np.cumsum(nrows)
     while start < setup.count:
         # take triangles until about _ROWS_PER_CHUNK rows are gathered
         base = cum[start - 1] if start else 0
         stop = max(int(np.searchsorted(cum, base + _ROWS_PER_CHUNK, side="right")), start + 1)
-        tris = np.arange(start, stop)
         counts = nrows[start:stop]
-        tri = np.repeat(tris, counts)
-        first = np.repeat(np.cumsum(counts) - counts, counts)
-        py = setup.y0[tri] + (np.arange(len(tri)) - first)
-        lo, length = setup.spans(tri, py)
-        nz = length > 0
-        out_tri.append(tri[nz])
-        out_y.append(py[nz].astype(np.int32))
-        out_lo.append(lo[nz].astype(np.int32))
-        out_len.append(length[nz])
+        each = lambda per_tri: np.repeat(per_tri[..., start:stop], counts, axis=-1)  # noqa: E731
+        py = np.arange(base, cum[stop - 1]) + each(y_off)
+        ys = py * _ONE + _HALF
+        lo, hi = each(setup.x0), each(setup.x1)
+        # edge k at pixel x of row ys: kk + ea*_ONE*x >= 0, kk = ec + eb*ys
+        kk = each(setup.eb)
+        kk *= ys
+        kk += each(setup.ec)
+        kk //= each(div)                                  # floor(kk / (|ea| * _ONE))
+        left, right = each(pos), each(neg)
+        empty = np.zeros(len(py), dtype=bool)
+        for k in range(3):
+            np.maximum(lo, np.negative(kk[k]), out=lo, where=left[k])
+            np.minimum(hi, kk[k], out=hi, where=right[k])
+            empty |= ~(left[k] | right[k]) & (kk[k] < 0)
+        length = hi - lo + 1
+        keep = ~empty & (length > 0)
+        out_tri.append(np.repeat(np.arange(start, stop), counts)[keep])
+        out_y.append(py[keep].astype(np.int32))
+        out_lo.append(lo[keep].astype(np.int32))
+        out_len.append(length[keep])
         start = stop
     cat = lambda parts, dt: np.concatenate(parts).astype(dt) if parts else np.zeros(0, dt)  # noqa: E731
     return cat(out_tri, np.int64), cat(out_y, np.int32), cat(out_lo, np.int32), cat(out_len, np.int64)
@@ -165,38 +180,50 @@ def rasterize(batch: TriangleBatch, width: int, height: int,
     setup = _Setup(clip_triangles(batch), width, height, cull)
     tri, py, lo, length = _row_spans(setup)
     total = int(length.sum())
-    out = {name: np.empty((total, 4) if name == "rgba" else total, dtype)
-           for name, dtype in DTYPES.items()}
-    planes, origin = setup.planes
+    # per-span constants spread over the span's fragments directly into the outputs
+    out = {"y": np.repeat(py.astype(np.uint16), length),
+           "prim": np.repeat(setup.prim[tri], length),
+           "opaque": np.repeat(setup.opaque[tri], length)}
+    for name in ("x", "z", "rgba"):
+        out[name] = np.empty((total, 4) if name == "rgba" else total, DTYPES[name])
+    table, ox, oy = setup.planes
     ends = np.cumsum(length)
     bounds = [0]
     while bounds[-1] < len(length):  # row chunks of about _FRAGMENTS_PER_CHUNK fragments
         done = ends[bounds[-1] - 1] if bounds[-1] else 0
         nxt = int(np.searchsorted(ends, done + _FRAGMENTS_PER_CHUNK, side="right"))
         bounds.append(max(nxt, bounds[-1] + 1))
+    steps = np.arange(max(_FRAGMENTS_PER_CHUNK, int(length.max(initial=0))))   # j, then j + 0.5
+    half_steps = steps + 0.5
     from tqdm import tqdm
 
     bar = tqdm(total=total, unit="frag", unit_scale=True, disable=(None if progress is None else not progress),
                desc="rasterize", leave=False)
     pos = 0
     for a, b in zip(bounds[:-1], bounds[1:]):
-        lens = length[a:b]
-        n = int(lens.sum())
-        row = np.repeat(np.arange(a, b), lens)
-        first = np.repeat(np.cumsum(lens) - lens, lens)
-        x = lo[row] + (np.arange(n) - first)
-        y = py[row]
-        t = tri[row]
+        # per span (row): the 6 planes' dadx, a0 and dady*dy, and dx of the span's pixel 0
+        lens, t = length[a:b], tri[a:b]
+        n = int(ends[b - 1]) - pos
+        x_base = lo[a:b] - (ends[a:b] - lens - pos)      # x = x_base + j, j = fragment index in chunk
+        per_row = np.empty((20, b - a))
+        np.take(table, t, axis=1, out=per_row[0:18])
+        per_row[12:18] *= (py[a:b] + 0.5) - oy[t]
+        np.subtract(x_base, ox[t], out=per_row[18])
+        per_row[19] = x_base
+        # the same float64 operations, in the same order, as a0 + dadx*dx + dady*dy per fragment
+        frag = np.repeat(per_row, lens, axis=1)
+        dx = frag[18]
+        dx += half_steps[:n]                             # (x + 0.5) - x0, exact
+        vals = frag[0:6]
+        vals *= dx
+        vals += frag[6:12]
+        vals += frag[12:18]
         sl = slice(pos, pos + n)
-        out["x"][sl], out["y"][sl] = x, y
-        dx = (x + 0.5) - origin[t, 0]
-        dy = (y + 0.5) - origin[t, 1]
-        p = planes[t]                                              # (n, 6, 3)
-        vals = p[:, :, 0] + p[:, :, 1] * dx[:, None] + p[:, :, 2] * dy[:, None]
-        np.clip(vals[:, 0], 0.0, 1.0, out=out["z"][sl], casting="same_kind")
-        np.clip(vals[:, 2:6] / vals[:, 1:2], 0.0, 1.0, out=out["rgba"][sl], casting="same_kind")
-        out["prim"][sl] = setup.prim[t]
-        out["opaque"][sl] = setup.opaque[t]
+        np.clip(vals[0], 0.0, 1.0, out=out["z"][sl], casting="same_kind")
+        rgba = out["rgba"][sl]
+        np.divide(vals[2:6], vals[1], out=rgba.T, casting="same_kind")
+        np.clip(rgba, 0.0, 1.0, out=rgba)    # the same as clipping before rounding to float32
+        np.add(frag[19], steps[:n], out=out["x"][sl], casting="unsafe")
         pos += n
         bar.update(n)
     bar.close()
