@@ -32,24 +32,50 @@ def make_context():
     return moderngl.create_standalone_context(backend="egl")
 
 
+class CountPass:
+    """The counting draw of ``clip`` triangles on a ``width`` x ``height`` float32 target,
+    set up once so that it can be drawn again (the rasterizer benchmark times ``draw``)."""
+
+    def __init__(self, ctx, clip: np.ndarray, width: int, height: int):
+        import moderngl
+
+        self.ctx, self.width, self.height = ctx, width, height
+        self.prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
+        self.tex = ctx.texture((width, height), 1, dtype="f4")
+        self.fbo = ctx.framebuffer(color_attachments=[self.tex])
+        self.fbo.use()
+        ctx.viewport = (0, 0, width, height)
+        ctx.disable(moderngl.CULL_FACE | moderngl.DEPTH_TEST)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.ONE, moderngl.ONE
+        ctx.blend_equation = moderngl.FUNC_ADD
+        self.vbo = ctx.buffer(np.ascontiguousarray(clip, dtype="f4").reshape(-1, 4).tobytes())
+        self.vao = ctx.vertex_array(self.prog, [(self.vbo, "4f", "in_clip")])
+
+    def clear(self) -> None:
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+
+    def draw(self) -> None:
+        """Draw every triangle once and wait until the GL has finished."""
+        import moderngl
+
+        self.vao.render(moderngl.TRIANGLES)
+        self.ctx.finish()
+
+    def counts(self) -> np.ndarray:
+        data = np.frombuffer(self.fbo.read(components=1, dtype="f4"), dtype=np.float32)
+        return data.reshape(self.height, self.width)
+
+    def release(self) -> None:
+        for obj in (self.vao, self.vbo, self.fbo, self.tex, self.prog):
+            obj.release()
+
+
 def gl_fragment_counts(ctx, clip: np.ndarray, width: int, height: int) -> np.ndarray:
     """(height, width) float fragment counts, row 0 = bottom (OpenGL window y)."""
-    import moderngl
-
-    prog = ctx.program(vertex_shader=VERTEX, fragment_shader=FRAGMENT)
-    tex = ctx.texture((width, height), 1, dtype="f4")
-    fbo = ctx.framebuffer(color_attachments=[tex])
-    fbo.use()
-    ctx.viewport = (0, 0, width, height)
-    ctx.disable(moderngl.CULL_FACE | moderngl.DEPTH_TEST)
-    ctx.enable(moderngl.BLEND)
-    ctx.blend_func = moderngl.ONE, moderngl.ONE
-    ctx.blend_equation = moderngl.FUNC_ADD
-    fbo.clear(0.0, 0.0, 0.0, 0.0)
-    vbo = ctx.buffer(np.ascontiguousarray(clip, dtype="f4").reshape(-1, 4).tobytes())
-    vao = ctx.vertex_array(prog, [(vbo, "4f", "in_clip")])
-    vao.render(moderngl.TRIANGLES)
-    data = np.frombuffer(fbo.read(components=1, dtype="f4"), dtype=np.float32)
-    for obj in (vao, vbo, fbo, tex, prog):
-        obj.release()
-    return data.reshape(height, width)
+    gl = CountPass(ctx, clip, width, height)
+    gl.clear()
+    gl.draw()
+    counts = gl.counts()
+    gl.release()
+    return counts
