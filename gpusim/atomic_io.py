@@ -54,16 +54,20 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
 @contextlib.contextmanager
 def atomic_folder(path: str | os.PathLike) -> Iterator[Path]:
     """A temporary folder beside ``path`` to write a set of outputs into; on success they all move into
-    ``path`` (created if absent), on any exception the folder is removed and ``path`` left untouched."""
+    ``path`` (created if absent), on any exception the folder is removed and ``path`` left untouched. A
+    folder among the outputs (a report's ``figures/``) replaces the one of that name in ``path`` whole."""
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
     try:
         yield tmp
         if target.is_dir():
-            for item in tmp.iterdir():
-                os.replace(item, target / item.name)
-            tmp.rmdir()
+            for item in list(tmp.iterdir()):
+                dest = target / item.name
+                if item.is_dir() and dest.is_dir():          # os.replace cannot move onto a folder with files
+                    os.replace(dest, tmp / f".{item.name}.old")
+                os.replace(item, dest)
+            shutil.rmtree(tmp)
         else:
             os.chmod(tmp, _mode(0o777))        # an ordinary folder (mkdtemp makes it private)
             os.replace(tmp, target)

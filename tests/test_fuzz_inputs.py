@@ -516,6 +516,57 @@ def test_flat_scale_with_flat_shading_is_fine(tmp_path, capsys):
     assert code == 0, stderr
 
 
+# ------------------------------------------------------------------------------- mesh files (OBJ, PLY, ...)
+
+TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+PLY_HEADER = ("ply\nformat {fmt} 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
+              "element face 1\nproperty list uchar int vertex_indices\nend_header\n")
+
+MESH_CASES = {
+    "empty.obj": b"",
+    "random-bytes.obj": np.random.default_rng(3).bytes(3000),
+    "text-coordinates.obj": b"v a b c\nf 1 2 3\n",
+    "two-coordinates.obj": b"v 0 0 0\nv 1 0\nf 1 2 3\n",
+    "face-beyond-vertices.obj": (TRIANGLE + "f 1 2 9\n").encode(),
+    "face-negative-index.obj": (TRIANGLE + "f -7 2 3\n").encode(),
+    "vertex-nan.obj": (TRIANGLE.replace("v 0 0 0", "v nan 0 0") + "f 1 2 3\n").encode(),
+    "vertex-inf.obj": (TRIANGLE.replace("v 0 0 0", "v inf 0 0") + "f 1 2 3\n").encode(),
+    "vertex-beyond-float.obj": b"v 1e308 0 0\nv -1e308 0 0\nv 0 1e308 0\nf 1 2 3\n",
+    "face-beyond-vertices.ply": (PLY_HEADER.format(fmt="ascii", n=3) + "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").encode(),
+    "1e12-vertices.ply": (PLY_HEADER.format(fmt="ascii", n=10**12) + "0 0 0\n").encode(),
+    "1e10-binary-vertices.ply": PLY_HEADER.format(fmt="binary_little_endian", n=10**10).encode() + bytes(1000),
+    "truncated-binary.ply": PLY_HEADER.format(fmt="binary_little_endian", n=3).encode(),
+    "face-beyond-vertices.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n",
+    "1e11-vertices.off": b"OFF\n99999999999 1 0\n0 0 0\n",
+    "short-facet.stl": b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0\nendloop\nendfacet\nendsolid\n",
+    "4e9-triangles.stl": bytes(80) + struct.pack("<I", 4_000_000_000) + bytes(50),
+    "truncated-binary.stl": np.random.default_rng(4).bytes(84),
+}
+
+
+@pytest.mark.parametrize("case", cases(MESH_CASES))
+def test_bad_mesh_file_is_rejected_in_one_line(tmp_path, capsys, case):
+    """A mesh file as the scene, and named by a scene file: each fails naming the file, never with a
+    traceback, numpy's warnings or an empty trace (a NaN vertex used to give one, with warnings)."""
+    mesh = tmp_path / case
+    mesh.write_bytes(MESH_CASES[case])
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE.replace('kind = "sphere"', f'kind = "mesh"\npath = "{case}"'))
+    out = tmp_path / "o.npz"
+    for source in (mesh, scene):
+        code, stdout, stderr = run_cli(capsys, ["trace", source, "-o", out, "--no-progress"])
+        assert_rejected(code, stdout, stderr, out)
+        assert case in stderr, "the error should name the mesh file"
+
+
+def test_a_valid_mesh_file_traces(tmp_path, capsys):
+    """The mesh cases fail for what they break, not for the command."""
+    mesh = tmp_path / "ok.obj"
+    mesh.write_text(TRIANGLE + "f 1 2 3\n")
+    code, _, stderr = run_cli(capsys, ["trace", mesh, "--size", "16x16", "-o", tmp_path / "o.npz", "--no-progress"])
+    assert code == 0 and stderr == "", stderr
+
+
 # ----------------------------------------------------------------------------------------- GPU configs
 
 GPU_CASES = {
@@ -710,6 +761,160 @@ def test_experiment_with_a_corrupt_trace_is_rejected_in_one_line(valid_trace, tm
     assert "cut.npz" in stderr
 
 
+# ------------------------------------------------------------------------- values on the command line
+
+ARGV_CASES = {
+    "param-nan": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k=nan", "-o", "{out}"],
+    "param-inf": ["replay", "{trace}", "--scheme", "wboit", "--param", "near=-inf", "-o", "{out}"],
+    "param-beyond-int64": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k=99999999999999999999",
+                           "-o", "{out}"],
+    "param-a-list": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k=[1, 2]", "-o", "{out}"],
+    "param-a-table": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k={a = 1}", "-o", "{out}"],
+    "param-bool-for-int": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k=true", "-o", "{out}"],
+    "param-unknown-choice": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "mode=7", "-o", "{out}"],
+    "fidelity-unknown": ["replay", "{trace}", "--scheme", "kbuffer", "--fidelity", "warp", "-o", "{out}"],
+    "thesis-for-other-scheme": ["replay", "{trace}", "--scheme", "kbuffer", "--fidelity", "thesis", "-o", "{out}"],
+    "gpu-set-nan": ["replay", "{trace}", "--scheme", "kbuffer", "--fidelity", "sampled", "--gpu-set",
+                    "sample.fraction=nan", "-o", "{out}"],
+    "schemes-unknown": ["schemes", "teleport"],
+    "trace-set-nan-width": ["trace", "default", "--set", "screen.width=nan", "-o", "{out}.npz"],
+    "trace-set-inf-alpha": ["trace", "default", "--set", "objects.0.alpha=inf", "-o", "{out}.npz"],
+    "trace-set-negative-index": ["trace", "default", "--set", "objects.-1.alpha=1", "-o", "{out}.npz"],
+    "trace-size-beyond-int64": ["trace", "default", "--size", "99999999999999999999x5", "-o", "{out}.npz"],
+    "trace-size-negative": ["trace", "default", "--size", "-5x5", "-o", "{out}.npz"],
+    "run-set-size-huge": ["run", "{experiment}", "--set", "size=99999x99999", "-o", "{out}", "--quiet"],
+    "run-set-param-inf": ["run", "{experiment}", "--set", "schemes.kbuffer.k=inf", "-o", "{out}", "--quiet"],
+    "run-set-gpus-number": ["run", "{experiment}", "--set", "gpus=[5]", "-o", "{out}", "--quiet"],
+    "run-set-trace-not-npz": ["run", "{experiment}", "--set", 'traces=["{experiment}"]', "-o", "{out}", "--quiet"],
+    "run-set-gpu-set-nan": ["run", "{experiment}", "--set", "gpu-set.sample.fraction=[nan]", "-o", "{out}",
+                            "--quiet"],
+    "config-set-fidelity-number": ["config", "{experiment}", "--set", "fidelity=5"],
+}
+
+
+@pytest.mark.parametrize("case", cases(ARGV_CASES))
+def test_hostile_command_line_values_are_rejected_in_one_line(valid_trace, tmp_path, capsys, case, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    experiment = tmp_path / "e.toml"
+    experiment.write_text(EXPERIMENT + SCHEME + "[schemes.kbuffer]\nk = 2\n")
+    out = tmp_path / "out"
+    argv = [a.replace("{trace}", str(valid_trace)).replace("{out}", str(out)).replace("{experiment}", str(experiment))
+            for a in ARGV_CASES[case]]
+    output = Path(argv[argv.index("-o") + 1]) if "-o" in argv else None
+    try:
+        code, stdout, stderr = run_cli(capsys, argv)
+    except SystemExit as exc:                 # a usage error: argparse's one line, "gpusim COMMAND: error: ..."
+        stdout, stderr = capsys.readouterr()
+        prefix = f"gpusim {argv[0]}: error: "
+        assert exc.code == 2 and stderr.startswith(prefix) and stderr.count("\n") == 1, stderr
+        code, stderr = 2, stderr.replace(prefix, "gpusim: error: ")
+    assert_rejected(code, stdout, stderr, output)
+
+
+# ------------------------------------------------------------------- results directories (gpusim report)
+
+
+@pytest.fixture(scope="module")
+def results_dir(tmp_path_factory) -> Path:
+    """A finished sweep of two functional runs with its report; every damaged one starts as a copy."""
+    root = tmp_path_factory.mktemp("results")
+    (root / "e.toml").write_text(EXPERIMENT.replace("16x16", "8x8") + SCHEME + "[schemes.kbuffer]\nk = 2\n")
+    assert main(["run", str(root / "e.toml"), "-o", str(root / "out"), "--workers", "1", "--quiet"]) == 0
+    return root / "out"
+
+
+def _edit_table(name: str, change):
+    """A case: ``name``.parquet read, changed by ``change(frame)`` (which returns the new frame), written back."""
+    def make(root: Path) -> None:
+        import pandas as pd
+        change(pd.read_parquet(root / f"{name}.parquet")).to_parquet(root / f"{name}.parquet")
+    return make
+
+
+def _set_column(name: str, column: str, value):
+    return _edit_table(name, lambda d: d.assign(**{column: value}))
+
+
+def _each_file(pattern: str, write):
+    """A case: every file matching ``pattern`` under the directory rewritten by ``write(path)``."""
+    def make(root: Path) -> None:
+        paths = sorted(root.glob(pattern))
+        assert paths, pattern
+        for path in paths:
+            write(path)
+    return make
+
+
+def _small_png(path: Path) -> None:
+    from gpusim.report.images import save_rgb8_png
+    save_rgb8_png(np.zeros((3, 5, 3), np.uint8), path)
+
+
+def _grey_png(path: Path) -> None:
+    from PIL import Image
+    Image.fromarray(np.zeros((8, 8), np.uint8), "L").save(path, format="png")
+
+
+REPORT_CASES = {
+    "results-truncated": _each_file("results.parquet", lambda p: p.write_bytes(p.read_bytes()[:500])),
+    "results-empty-file": _each_file("results.parquet", lambda p: p.write_bytes(b"")),
+    "results-is-csv-text": _each_file("results.parquet", lambda p: p.write_text("run,status\nx,ok\n")),
+    "stats-missing": _each_file("stats.parquet", Path.unlink),
+    "stats-truncated": _each_file("stats.parquet", lambda p: p.write_bytes(p.read_bytes()[:300])),
+    "results-without-cycles": _edit_table("results", lambda d: d.drop(columns=["cycles"])),
+    "results-without-lead-columns": _edit_table("results", lambda d: d[["cycles"]]),
+    "cycles-text": _set_column("results", "cycles", "many"),
+    "cycles-inf": _set_column("results", "cycles", float("inf")),
+    "rmse-negative": _set_column("results", "rmse", -1.0),
+    "status-unknown": _set_column("results", "status", "weird"),
+    "status-missing": _set_column("results", "status", None),
+    "scheme-a-number": _set_column("results", "scheme", 5),
+    "width-zero": _set_column("results", "width", 0),
+    "height-missing": _set_column("results", "height", float("nan")),
+    "index-fractional": _set_column("results", "index", 0.5),
+    "stats-value-text": _set_column("stats", "value", "x"),
+    "stats-without-unit": _edit_table("stats", lambda d: d.drop(columns=["unit"])),
+    "run-image-truncated": _each_file("runs/*/image.png", lambda p: p.write_bytes(p.read_bytes()[:100])),
+    "run-image-wrong-size": _each_file("runs/*/image.png", _small_png),
+    "run-image-greyscale": _each_file("runs/*/image.png", _grey_png),
+    "reference-image-truncated": _each_file("traces/*.png", lambda p: p.write_bytes(p.read_bytes()[:100])),
+}
+
+
+def _report_state(root: Path) -> dict:
+    return {p.relative_to(root).as_posix(): p.read_bytes() for p in [root / "index.md", *root.glob("figures/*")]}
+
+
+@pytest.mark.parametrize("case", cases(REPORT_CASES))
+def test_damaged_results_are_rejected_by_report_in_one_line(results_dir, tmp_path, capsys, case):
+    """Into a new folder: nothing is made there. In place: the old report (index.md, figures/) stays."""
+    import shutil
+    root = tmp_path / "res"
+    shutil.copytree(results_dir, root)
+    before = _report_state(root)
+    assert "figures/images-default.png" in before
+    REPORT_CASES[case](root)
+    out = tmp_path / "report"
+    assert_rejected(*run_cli(capsys, ["report", root, "-o", out]), out)
+    code, stdout, stderr = run_cli(capsys, ["report", root])
+    assert_rejected(code, stdout, stderr)
+    assert str(root) in stderr, "the error should name the directory or its file"
+    assert _report_state(root) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["res"]          # no temporary folder left
+
+
+def test_report_rewrites_a_report_whole(results_dir, tmp_path, capsys):
+    """The undamaged copy reports; a figure the new report does not draw goes with the old figures."""
+    import shutil
+    root = tmp_path / "res"
+    shutil.copytree(results_dir, root)
+    (root / "figures" / "stale.png").write_bytes(b"old")
+    code, stdout, stderr = run_cli(capsys, ["report", root])
+    assert code == 0 and stderr == "" and stdout == f"wrote {root / 'index.md'}\n"
+    assert not (root / "figures" / "stale.png").exists() and (root / "figures" / "images-default.png").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["res"]
+
+
 # ------------------------------------------------------------------- inputs that would exhaust memory
 
 HUGE_GPU_SETS = ["core.sms=1000000000", "rop.units=1000000000", "memory.partitions=1000000000"]
@@ -719,7 +924,8 @@ HUGE_GPU_SETS = ["core.sms=1000000000", "rop.units=1000000000", "memory.partitio
     *[["replay", "{trace}", "--scheme", "alpha-blend", "--fidelity", "full", "--gpu-set", s, "-o", "{out}"]
       for s in HUGE_GPU_SETS],
     ["trace", "{tmp}/h.toml", "-o", "{out}.npz", "--no-progress"],
-], ids=[*(s.split("=")[0] for s in HUGE_GPU_SETS), "histogram-1e12-fragments"])
+    ["trace", "default", "--size", "16384x16384", "-o", "{out}.npz", "--no-progress"],
+], ids=[*(s.split("=")[0] for s in HUGE_GPU_SETS), "histogram-1e12-fragments", "largest-screen"])
 def test_requests_beyond_memory_fail_in_one_line(valid_trace, tmp_path, argv):
     """Run in a child limited to MEMORY_LIMIT bytes: out of memory is one line, not a traceback or a
     machine brought to its knees."""

@@ -16,9 +16,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from gpusim.atomic_io import write_text_atomic
+from gpusim.atomic_io import atomic_folder, write_text_atomic
 from gpusim.errors import GpusimError
 from gpusim.report import figures
+from gpusim.report.check import check_tables
 from gpusim.report.tables import (best_level, fidelity_errors, fidelity_summary, fmt, markdown, one_per_functional,
                                   structure_table, unit_utilisation, with_labels)
 
@@ -44,6 +45,7 @@ class _Report:
             self.stats = pd.read_parquet(root / "stats.parquet")
         except (OSError, ValueError) as exc:
             raise GpusimError(f"{root}: cannot read the results tables ({exc}); rerun gpusim run into it") from None
+        check_tables(root, self.results, self.stats)
         self.meta = {}
         if (root / "resolved.toml").is_file():
             self.meta = tomllib.loads((root / "resolved.toml").read_text())
@@ -286,17 +288,18 @@ class _Report:
             if not ref_path.is_file():
                 continue
             reference = load_rgb8_png(ref_path)
+            size = reference.shape[:2]                 # every run image is the trace's screen
             scene = rows["scene_label"].iloc[0]
             entries = []
             for _, row in rows.iterrows():
                 path = self.root / "runs" / row["run"] / "image.png"
                 if path.is_file():
-                    entries.append((row["config"], load_rgb8_png(path), row["differing_pixels"]))
+                    entries.append((row["config"], load_rgb8_png(path, size), row["differing_pixels"]))
             timed = self.ok[(self.ok["trace"] == trace) & self.ok["rmse_timed"].notna()]
             for _, row in timed.drop_duplicates("config").iterrows():
                 path = self.root / "runs" / row["run"] / "image-timed.png"
                 if path.is_file():
-                    entries.append((f"{row['config']} ({row['fidelity']}, event order)", load_rgb8_png(path),
+                    entries.append((f"{row['config']} ({row['fidelity']}, event order)", load_rgb8_png(path, size),
                                     row["differing_pixels_timed"]))
             for page in range(0, len(entries), IMAGES_PER_FIGURE):
                 part = entries[page:page + IMAGES_PER_FIGURE]
@@ -333,12 +336,20 @@ class _Report:
         self.scheme_stats()
         self.images()
         self.problems()
-        index = self.out / "index.md"
+        index = self.figdir.parent / "index.md"
         write_text_atomic(index, "\n".join(self.lines).rstrip() + "\n")
         return index
 
 
 def write_report(root: Path, out: Path | None = None) -> Path:
-    """Write ``out/index.md`` (default ``root``) and its figures from ``root``'s tables; returns its path."""
+    """Write ``out/index.md`` (default ``root``) and its figures from ``root``'s tables; returns its path.
+
+    The tables are read and checked first; index.md and figures/ are written into a temporary folder and
+    replace the old ones together, so a report that fails or is interrupted leaves the old one (or none)."""
     root = Path(root)
-    return _Report(root, Path(out) if out else root).write()
+    out = Path(out) if out else root
+    report = _Report(root, out)
+    with atomic_folder(out) as tmp:
+        report.figdir = tmp / "figures"
+        report.write()
+    return out / "index.md"

@@ -9,6 +9,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from gpusim.atomic_io import atomic_output
+from gpusim.errors import GpusimError
 
 
 def save_image_png(image: np.ndarray, path: str | os.PathLike) -> None:
@@ -25,11 +26,20 @@ def save_rgb8_png(rgb: np.ndarray, path: str | os.PathLike) -> None:
         mpimg.imsave(handle, np.ascontiguousarray(rgb, dtype=np.uint8), format="png")
 
 
-def load_rgb8_png(path: str | os.PathLike) -> np.ndarray:
-    """An 8-bit PNG back as (H, W, 3) uint8 rows, top row first."""
+def load_rgb8_png(path: str | os.PathLike, size: tuple[int, int] | None = None) -> np.ndarray:
+    """An 8-bit PNG back as (H, W, 3) uint8 rows, top row first. A file that is not a colour PNG (of
+    ``size`` = (H, W), when given) fails in one line naming it."""
     from matplotlib import image as mpimg
 
-    data = mpimg.imread(path)
+    try:
+        data = mpimg.imread(path)
+    except Exception as exc:            # Pillow raises OSError, SyntaxError, ValueError, ... for a damaged file
+        raise GpusimError(f"{path}: not a readable PNG image ({type(exc).__name__}: {exc}); rerun the command "
+                          "that wrote it") from None
+    if data.ndim != 3 or data.shape[2] not in (3, 4) or (size is not None and data.shape[:2] != tuple(size)):
+        raise GpusimError(f"{path}: a {'x'.join(map(str, data.shape))} image where an RGB image"
+                          + (f" of {size[1]}x{size[0]} pixels" if size is not None else "")
+                          + " belongs; rerun the command that wrote it")
     if data.dtype != np.uint8:
         data = (data * 255.0 + 0.5).astype(np.uint8)
     return data[..., :3]

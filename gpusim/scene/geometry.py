@@ -151,16 +151,28 @@ def mesh_file(spec: m.Mesh, base_dir: Path, where: str) -> MeshData:
         raise ConfigError(f"{where}: mesh file {path} not found; {hint}")
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
+    except ImportError:       # trimesh looks for a text decoder when a file is neither text nor a binary mesh
+        raise ConfigError(f"{where}: cannot read mesh {path}: not a readable {path.suffix.lstrip('.').upper()} file "
+                          "(neither text nor binary data of that format)") from None
     except Exception as exc:  # trimesh raises many types for bad files
         raise ConfigError(f"{where}: cannot read mesh {path} ({type(exc).__name__}: {exc})") from None
     verts = np.asarray(loaded.vertices, dtype=np.float64)
     faces = np.asarray(loaded.faces, dtype=np.int64)
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise ConfigError(f"{where}: mesh {path} has no triangles")
+    if verts.ndim != 2 or verts.shape[1] != 3 or not np.isfinite(verts).all():
+        raise ConfigError(f"{where}: mesh {path} has a vertex coordinate that is not a finite number")
+    if faces.min() < 0 or faces.max() >= len(verts):
+        bad = int(faces[(faces < 0) | (faces >= len(verts))][0])
+        raise ConfigError(f"{where}: mesh {path} has a face naming vertex {bad}, outside its {len(verts):,} "
+                          f"vertices (0..{len(verts) - 1})")
     if spec.normalize:
         lo, hi = verts.min(axis=0), verts.max(axis=0)
-        centre = (lo + hi) / 2
-        radius = np.linalg.norm(verts - centre, axis=1).max()
+        centre = lo / 2 + hi / 2
+        with np.errstate(over="ignore", invalid="ignore"):
+            radius = np.linalg.norm(verts - centre, axis=1).max()
+        if not np.isfinite(radius):
+            raise ConfigError(f"{where}: mesh {path} spans more than a float can hold; scale its coordinates down")
         verts = (verts - centre) / (radius if radius > 0 else 1.0)
     # area-weighted vertex normals
     tri = verts[faces]
