@@ -176,3 +176,39 @@ def test_sigterm_while_an_output_is_written_leaves_no_partial_file(tmp_path, cap
         assert "run the same command again to resume" in err
     else:                                # no output at all, and the old report is whole
         assert after == before and not out.exists() and not out.with_suffix(".npz").exists()
+
+
+def _stderr_on_a_terminal(argv, columns=120):
+    """Run ``gpusim ARGV`` with stderr on a pseudo-terminal of ``columns``; returns (exit status, stderr)."""
+    import fcntl
+    import os
+    import pty
+    import struct
+    import termios
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 40, columns, 0, 0))
+    proc = subprocess.Popen([sys.executable, "-m", "gpusim", *argv], stdout=subprocess.DEVNULL, stderr=slave)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:                     # EIO: the child closed the terminal
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    os.close(master)
+    return proc.wait(timeout=120), b"".join(chunks).decode(errors="replace")
+
+
+def test_long_work_shows_a_progress_bar_on_a_terminal_only(tmp_path, capsys):
+    trace = tmp_path / "t.npz"
+    code, err = _stderr_on_a_terminal(["trace", "default", "--size", "48x48", "-o", str(trace)])
+    assert code == 0 and "rasterize:" in err and "frag/s" in err, err
+    code, err = _stderr_on_a_terminal(["trace", "default", "--size", "48x48", "-o", str(trace), "--no-progress"])
+    assert code == 0 and err == "", err
+    code, err = _stderr_on_a_terminal(["replay", str(trace), "--scheme", "depth-peeling", "--fidelity", "full"])
+    assert code == 0 and "full level" in err and "warp" in err, err
+    code, _, err = run(capsys, "trace", "default", "--size", "48x48", "-o", str(trace))
+    assert code == 0 and err == ""                                # not a terminal: no bar
