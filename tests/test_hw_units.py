@@ -209,6 +209,34 @@ def test_l2_slice_is_lru_and_write_back():
     assert (l2.hits[0], l2.misses[0]) == (1, 5)
 
 
+def test_a_load_through_the_l2_of_the_modern_preset():
+    """One warp loads 32 x 4 B at address 0 in two passes on the unmodified `modern` preset (H100: 16 L2 slices of
+    128-byte lines, 64 B/cycle, 260 cycles; HBM 105.7 B/cycle, 480 cycles; 40 cycles of interconnect each way;
+    3 us of driver time per pass at 1980 MHz = 5940 cycles). The coalescer makes four 32-byte requests, all in
+    line 0 of partition 0's slice (256-byte interleave).
+
+    first pass:  request 1 arrives at 40, holds the slice 32/64 = 0.5 cycle, misses: HBM 40.5 -> 40.80 (32 B at
+                 105.7 B/cycle), reply at ceil(40.80) + 480 = 521, + 260 = 781; requests 2-4 hit the line request 1
+                 allocated: slice until 41, 41.5, 42, replies at ceil + 260 = 301, 302, 302. Done at 781 + 40 = 821.
+    second pass: the line is still there: four hits, the last at 42 + 260 = 302, + 40 = 342.
+    """
+    plan = OpPlan([Pass("first", "fullscreen", "pixel"), Pass("again", "fullscreen", "pixel")], ["a"])
+    for p in (0, 1):
+        plan.add(p, "load", "a", 32, 1, lambda i, s: i * 4, 4)
+    gpu = load_gpu("modern")
+    work = Workload(plan, layout_bases(plan.structures, {"a": 128}), 64, 64, np.zeros(32, np.int64), np.arange(32),
+                    triangles=0)
+    machine = Machine(gpu, lower(work, gpu), 64)
+    cycles = machine.run()
+    assert machine.built_units() == ["core", "coalescer", "l2", "dram"]
+    assert machine.pass_cycles == [5940 + 821, 5940 + 342] and cycles == 13_043
+    l2, dram = machine.units["l2"].summary(cycles), machine.units["dram"].summary(cycles)
+    assert (l2["requests"], l2["hits"], l2["misses"]) == (8, 7, 1)
+    assert l2["busy_cycles"] == 8 * 0.5
+    assert dram["requests"] == 1 and dram["busy_cycles"] == pytest.approx(32 / 105.7, abs=2 ** -16)
+    assert machine.units["l2"].values(cycles)["hits"] == [7] + [0] * 15      # all in partition 0's slice
+
+
 def test_sm_placement_is_per_pass_and_every_stat_uses_it():
     # pass A has 1 warp, pass B 3 warps, on 2 SMs: each pass places its warps from SM 0, so SM 0 runs A's warp
     # and B's warps 0 and 2, SM 1 B's warp 1 (numbering warps across passes would have said 2 and 2)
