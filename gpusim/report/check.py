@@ -27,7 +27,7 @@ MAY_BE_INFINITE = ("psnr",)
 def check_tables(root: Path, results: pd.DataFrame, stats: pd.DataFrame) -> None:
     """Raise a one-line :class:`GpusimError` unless ``results`` and ``stats`` (read from ``root``) hold the
     columns the report reads, of the kinds it reads, with values a run can give."""
-    fix = f"rerun gpusim run into {root} (it rewrites the tables from runs/)"
+    fix = f"run the experiment into it again (gpusim run {root / 'resolved.toml'} -o {root}) to rewrite them"
     where = root / "results.parquet"
 
     def fail(path: Path, problem: str) -> None:
