@@ -29,7 +29,8 @@ _CLIP_PLANES = np.array([
 ], dtype=np.float64)
 _SCREEN_PLANES = np.array([[1, 0, 0, 1], [-1, 0, 0, 1], [0, 1, 0, 1], [0, -1, 0, 1]], dtype=np.float64)
 _ALL_PLANES = np.concatenate([_CLIP_PLANES, _SCREEN_PLANES])
-assert all(np.count_nonzero(p[:3]) == 1 and np.abs(p[:3]).sum() == 1 and p[3] > 0 for p in _ALL_PLANES)
+assert all(np.count_nonzero(p[:3]) == 1 and np.abs(p[:3]).sum() == 1 and p[3] > 0
+           and np.log2(p[3]) % 1 == 0 for p in _ALL_PLANES)   # the form _outside relies on
 _CLIP = np.arange(len(_CLIP_PLANES))                    # planes that force clipping
 _REJECT = np.array([0, 1, *range(len(_CLIP_PLANES), len(_ALL_PLANES))])  # near, far, screen
 
@@ -56,35 +57,40 @@ def _clip_polygon(verts: np.ndarray, attrs: np.ndarray) -> tuple[np.ndarray, np.
     return verts, attrs
 
 
-def _outside(clip: np.ndarray) -> np.ndarray:
-    """(T, 3, planes) bool: vertex outside each of _ALL_PLANES (plane . v < 0).
+def _outside(clip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per plane of _ALL_PLANES and triangle, whether all three vertices and whether any vertex
+    lies outside it (plane . v < 0): two (planes, T) bool arrays.
 
     Every plane is s * coordinate + m * w with s = +-1 and m a power of two, so
     plane . v < 0 holds exactly when coordinate < -m*w (s = 1) or > m*w (s = -1):
     a comparison, with no rounded sum and no matrix product (whose threads cost more
     than the work).
     """
-    out = np.empty(clip.shape[:2] + (len(_ALL_PLANES),), dtype=bool)
-    scaled_w = {}
+    v = np.ascontiguousarray(clip.transpose(2, 1, 0))          # (4, 3, T)
+    bound = {m: v[3] * m for m in set(_ALL_PLANES[:, 3].tolist())}
+    all_out = np.empty((len(_ALL_PLANES), len(clip)), dtype=bool)
+    any_out = np.empty_like(all_out)
     for k, plane in enumerate(_ALL_PLANES):
         axis = int(np.flatnonzero(plane[:3])[0])
         m = float(plane[3])
-        if m not in scaled_w:
-            scaled_w[m] = clip[..., 3] * m
         if plane[axis] > 0:
-            np.less(clip[..., axis], np.negative(scaled_w[m]), out=out[..., k])
+            out = np.less(v[axis], np.negative(bound[m]))
         else:
-            np.greater(clip[..., axis], scaled_w[m], out=out[..., k])
-    return out
+            out = np.greater(v[axis], bound[m])
+        np.logical_and(out[0], out[1], out=all_out[k])
+        all_out[k] &= out[2]
+        np.logical_or(out[0], out[1], out=any_out[k])
+        any_out[k] |= out[2]
+    return all_out, any_out
 
 
 def clip_triangles(batch: TriangleBatch) -> TriangleBatch:
     """Drop invisible triangles and clip crossing ones; submission order is kept."""
     if len(batch) == 0:
         return batch
-    outside = _outside(batch.clip)
-    visible = ~(outside[:, 0] & outside[:, 1] & outside[:, 2])[:, _REJECT].any(axis=1)
-    crossing = visible & (outside[:, 0] | outside[:, 1] | outside[:, 2])[:, _CLIP].any(axis=1)
+    all_out, any_out = _outside(batch.clip)
+    visible = ~all_out[_REJECT].any(axis=0)
+    crossing = visible & any_out[_CLIP].any(axis=0)
     if not crossing.any():
         if visible.all():
             return batch

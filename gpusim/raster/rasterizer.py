@@ -28,6 +28,18 @@ Rules (all exact, integer arithmetic where coverage is decided):
 The work is split into row spans (per triangle and pixel row, the exact first
 and last covered pixel from the three edge equations) and then fragments are
 emitted span by span in bounded chunks into arrays allocated once.
+
+Precision: set-up and interpolation are float64. Each fragment's value is
+``a0 + dadx*dx + dady*dy`` of its triangle's plane (window z; 1/w; rgba/w,
+divided by the interpolated 1/w), clamped and then rounded to float32. The
+emission loop evaluates exactly these float64 operations, but per attribute over
+chunks of about _FRAGMENTS_PER_CHUNK fragments that stay in cache, with each
+span's plane values gathered once and repeated over its fragments
+(tests/test_raster_exact.py holds it to the plain formula bit for bit). Mesa's
+llvmpipe keeps its plane coefficients and interpolates in float32; the two agree
+on coverage (tests/test_mesa_agreement.py), not on the last bits of depth and
+colour, and evaluating gpusim's planes in float32 instead would change about a
+third of its depth and colour values.
 """
 
 from __future__ import annotations
@@ -44,7 +56,8 @@ SUBPIXEL_BITS = 8
 _ONE = 1 << SUBPIXEL_BITS        # one pixel in fixed point
 _HALF = _ONE // 2                # pixel-centre offset
 _ROWS_PER_CHUNK = 1 << 16
-_FRAGMENTS_PER_CHUNK = 1 << 14
+_FRAGMENTS_PER_CHUNK = 1 << 14  # small enough for a chunk's float64 work to stay in cache
+_GATHER_BELOW = 0.75             # set-up gathers the kept triangles when fewer are kept
 
 
 class _Setup:
@@ -55,10 +68,10 @@ class _Setup:
     """
 
     def __init__(self, batch: TriangleBatch, width: int, height: int, cull: str):
-        clip = batch.clip
-        inv_w = 1.0 / clip[:, :, 3].T                                           # (3, T)
-        fx = np.rint((clip[:, :, 0].T * inv_w + 1.0) * (width / 2.0 * _ONE)).astype(np.int64)
-        fy = np.rint((clip[:, :, 1].T * inv_w + 1.0) * (height / 2.0 * _ONE)).astype(np.int64)
+        clip = np.ascontiguousarray(batch.clip.transpose(2, 1, 0))             # (4, 3, T)
+        inv_w = 1.0 / clip[3]
+        fx = np.rint((clip[0] * inv_w + 1.0) * (width / 2.0 * _ONE)).astype(np.int64)
+        fy = np.rint((clip[1] * inv_w + 1.0) * (height / 2.0 * _ONE)).astype(np.int64)
         area2 = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fx[2] - fx[0]) * (fy[1] - fy[0])
         keep = area2 != 0
         if cull == "back":
@@ -72,18 +85,20 @@ class _Setup:
         by1 = np.minimum((fy.max(axis=0) - _HALF) >> SUBPIXEL_BITS, height - 1)
         keep &= (bx0 <= bx1) & (by0 <= by1)
         sel = np.flatnonzero(keep)
-        self.count = len(sel)
-        if self.count < len(keep):
+        if len(sel) < _GATHER_BELOW * len(keep):       # set up the kept triangles only
             bx0, bx1, by0, by1, area2 = bx0[sel], bx1[sel], by0[sel], by1[sel], area2[sel]
-            fx, fy, inv_w = fx[:, sel], fy[:, sel], inv_w[:, sel]
-            clip, rgba = clip[sel], batch.rgba[sel]
+            fx, fy, inv_w, z = fx[:, sel], fy[:, sel], inv_w[:, sel], clip[2][:, sel]
+            rgba = batch.rgba[sel]
             self.prim, self.opaque = batch.prim[sel], batch.opaque[sel]
-        else:
-            rgba, self.prim, self.opaque = batch.rgba, batch.prim, batch.opaque
+        else:     # set up every triangle (cheaper than gathering); dropped ones get no rows
+            by1 = np.where(keep, by1, by0 - 1)
+            area2 = np.where(area2 == 0, 1, area2)     # no division by zero for degenerate ones
+            z, rgba, self.prim, self.opaque = clip[2], batch.rgba, batch.prim, batch.opaque
+        self.count = len(bx0)
         self.x0, self.x1, self.y0, self.y1 = bx0, bx1, by0, by1
         # z, 1/w and rgba/w at each vertex, (6, 3, T)
         attrs = np.empty((6, 3, self.count))
-        np.multiply(clip[:, :, 2].T, inv_w, out=attrs[0])
+        np.multiply(z, inv_w, out=attrs[0])
         attrs[0] += 1.0
         attrs[0] *= 0.5
         attrs[1] = inv_w
@@ -205,25 +220,29 @@ def rasterize(batch: TriangleBatch, width: int, height: int,
         lens, t = length[a:b], tri[a:b]
         n = int(ends[b - 1]) - pos
         x_base = lo[a:b] - (ends[a:b] - lens - pos)      # x = x_base + j, j = fragment index in chunk
-        per_row = np.empty((20, b - a))
+        per_row = np.empty((19, b - a))
         np.take(table, t, axis=1, out=per_row[0:18])
         per_row[12:18] *= (py[a:b] + 0.5) - oy[t]
         np.subtract(x_base, ox[t], out=per_row[18])
-        per_row[19] = x_base
-        # the same float64 operations, in the same order, as a0 + dadx*dx + dady*dy per fragment
-        frag = np.repeat(per_row, lens, axis=1)
-        dx = frag[18]
-        dx += half_steps[:n]                             # (x + 0.5) - x0, exact
-        vals = frag[0:6]
-        vals *= dx
-        vals += frag[6:12]
-        vals += frag[12:18]
         sl = slice(pos, pos + n)
-        np.clip(vals[0], 0.0, 1.0, out=out["z"][sl], casting="same_kind")
+        np.add(np.repeat(x_base, lens), steps[:n], out=out["x"][sl], casting="unsafe")
+        dx = np.repeat(per_row[18], lens)
+        dx += half_steps[:n]                             # (x + 0.5) - x0, exact
         rgba = out["rgba"][sl]
-        np.divide(vals[2:6], vals[1], out=rgba.T, casting="same_kind")
+        for k in (1, 0, 2, 3, 4, 5):
+            # the same float64 operations, in the same order, as a0 + dadx*dx + dady*dy per fragment
+            frag = np.repeat(per_row[k:18:6], lens, axis=1)
+            val = frag[0]
+            val *= dx
+            val += frag[1]
+            val += frag[2]
+            if k == 1:
+                inv_w = val
+            elif k == 0:
+                np.clip(val, 0.0, 1.0, out=out["z"][sl], casting="same_kind")
+            else:
+                np.divide(val, inv_w, out=rgba[:, k - 2], casting="same_kind")
         np.clip(rgba, 0.0, 1.0, out=rgba)    # the same as clipping before rounding to float32
-        np.add(frag[19], steps[:n], out=out["x"][sl], casting="unsafe")
         pos += n
         bar.update(n)
     bar.close()
