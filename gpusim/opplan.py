@@ -190,9 +190,7 @@ class OpPlan:
         count = np.broadcast_to(np.asarray(count, dtype=np.int64), (len(thread),))
         if len(thread) and int(count.sum()) > 0:
             if seq_pass is not None:
-                seq_pass = np.asarray(seq_pass, np.int64)
-                if len(seq_pass) < int(count.max()) or (np.diff(seq_pass) <= 0).any():
-                    raise ValueError("seq_pass must give a strictly ascending pass for every op of a thread")
+                seq_pass = self._seq_pass(seq_pass, count)
             self.groups.append(OpGroup(pass_index, op, structure, thread, count, offset, nbytes, dep, pass_fn,
                                        seq_pass))
 
@@ -209,19 +207,34 @@ class OpPlan:
             raise ValueError(f"pass index out of range 0..{len(self.passes) - 1}")
         return pass_index, thread
 
-    def compute(self, pass_index, thread, instructions, dep: bool = True) -> None:
+    def compute(self, pass_index, thread, instructions, dep: bool = True, count=1, seq_pass=None) -> None:
         """Append ALU work in program order: thread ``thread[i]`` runs ``instructions[i]`` instructions (a
         register sort, compositing). ``dep``: the work uses the result of the thread's previous operation (it
         waits for it). No memory operation: access counts and the OpStream leave it out; the timing model
-        issues it on the SM (a warp runs as long as its busiest lane)."""
+        issues it on the SM (a warp runs as long as its busiest lane).
+
+        ``count`` and ``seq_pass`` as for :meth:`add`: thread ``i`` runs the work once in each of the passes
+        ``seq_pass[:count[i]]`` (one group for depth peeling's work in every pass, so the plan grows with the
+        threads plus the passes, not their product)."""
         pass_index, thread = self._threads(pass_index, thread)
         n = len(thread)
         instructions = np.broadcast_to(np.asarray(instructions, dtype=np.int64), (n,))
+        count = np.broadcast_to(np.asarray(count, dtype=np.int64), (n,))
         if n and int(instructions.min()) < 0:
             raise ValueError("instructions must be >= 0")
-        if n and int(instructions.max()) > 0:
-            self.groups.append(OpGroup(pass_index, COMPUTE_OP, "", thread, np.ones(n, np.int64),
-                                       lambda i, s: np.zeros(len(i), np.int64), 0, dep, instructions=instructions))
+        if n and int(instructions.max()) > 0 and int(count.sum()) > 0:
+            if seq_pass is not None:
+                seq_pass = self._seq_pass(seq_pass, count)
+            self.groups.append(OpGroup(pass_index, COMPUTE_OP, "", thread, count,
+                                       lambda i, s: np.zeros(len(i), np.int64), 0, dep, seq_pass=seq_pass,
+                                       instructions=instructions))
+
+    @staticmethod
+    def _seq_pass(seq_pass, count: np.ndarray) -> np.ndarray:
+        seq_pass = np.asarray(seq_pass, np.int64)
+        if len(seq_pass) < int(count.max()) or (np.diff(seq_pass) <= 0).any():
+            raise ValueError("seq_pass must give a strictly ascending pass for every op of a thread")
+        return seq_pass
 
     @property
     def memory_groups(self) -> list[OpGroup]:

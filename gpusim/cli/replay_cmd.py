@@ -122,6 +122,9 @@ def _timing_text(t: dict, add) -> None:
         add(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")
     if len(t["passes"]) > 12:
         add(f"  pass       ... {len(t['passes']) - 12} more")
+    if t.get("repeated_passes"):
+        add(f"  note       {t['repeated_passes']:,} passes repeat an earlier pass's work (each group within "
+            "1% of its threads): timed once, counted each time")
     for name, u in t["units"].items():
         if "utilisation_mean" in u:
             add(f"  unit       {name:<10} utilisation mean {u['utilisation_mean']:.1%}"

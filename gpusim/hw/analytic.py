@@ -120,17 +120,33 @@ def _expand_pass(g, n):
     return key[new] // n, key[new] % n, np.diff(np.append(new, len(key)))
 
 
+class _StillIssuing:
+    """The threads of a ``seq_pass`` group that issue its op ``s``: those with more than ``s`` ops. Made when
+    the pass is reached (memory grows with the threads, not threads x passes); the sets are nested (fewer as
+    ``s`` grows), so two of one group with the same size are the same set."""
+
+    def __init__(self, count: np.ndarray, ascending: np.ndarray, s: int):
+        self.count, self.ascending, self.s = count, ascending, s
+
+    def size(self) -> int:
+        return len(self.ascending) - int(np.searchsorted(self.ascending, self.s, side="right"))
+
+    def __call__(self) -> np.ndarray:
+        return np.flatnonzero(self.count > self.s)
+
+
 def _group_passes(g):
     """Where group ``g``'s operations fall: (lane index into ``g.thread``, ops, {pass: selection}) with the
-    selection of each pass's lanes into the first two (None: all of them; a callable making it when the pass
-    is reached, for a ``seq_pass`` group: memory grows with the threads, not with threads x passes)."""
+    selection of each pass's lanes into the first two (None: all of them; a :class:`_StillIssuing` for a
+    ``seq_pass`` group whose threads issue different numbers of ops)."""
     n = len(g.thread)
     if g.seq_pass is not None:          # op s of every thread in pass seq_pass[s]
         count = g.count
         if int(count.min()) == int(count.max()):
             where = {int(g.seq_pass[s]): None for s in range(int(count.max()))}
         else:
-            where = {int(g.seq_pass[s]): (lambda s=s: np.flatnonzero(count > s)) for s in range(int(count.max()))}
+            ascending = np.sort(count)
+            where = {int(g.seq_pass[s]): _StillIssuing(count, ascending, s) for s in range(int(count.max()))}
         return np.arange(n), np.ones(n, np.int64), where
     if g.pass_fn is not None:
         gp, li, cnt = _expand_pass(g, n)
@@ -138,6 +154,45 @@ def _group_passes(g):
     if np.isscalar(g.pass_index):
         return np.arange(n), g.count, {int(g.pass_index): None}
     return np.arange(n), g.count, dict(split_by(np.asarray(g.pass_index, np.int64)))
+
+
+REPEAT_TOLERANCE = 0.01    # a pass whose groups each differ from a timed pass's by at most this share of their threads
+
+
+def _pass_shape(pk, p: int, groups: list[int], placement, plan, bases) -> tuple[tuple, np.ndarray]:
+    """What decides a pass's analytic time: its kind and groups, and for a group whose threads there are a
+    subset of its own (one thread per fragment a pass blends) how many and at which addresses, all in the
+    key; and each ``seq_pass`` group's threads in it (-1: all of the group's). Depth peeling's passes once
+    one deep pixel is left, and the R-buffer's recirculations of one pixel, repeat nearly the same work
+    thousands of times."""
+    sizes, subsets = [], []
+    for gi in groups:
+        sel = placement[gi][2][p]
+        if sel is None:
+            sizes.append(-1)
+        elif isinstance(sel, _StillIssuing):
+            sizes.append(sel.size())
+        else:
+            g = plan.groups[gi]
+            lanes = placement[gi][0][sel]
+            where = (np.zeros(0) if g.is_compute else
+                     bases[g.structure] + np.asarray(g.offset(lanes, np.zeros(len(lanes), np.int64)), np.float64))
+            counts = np.asarray(g.instructions)[lanes] if g.is_compute else placement[gi][1][sel]
+            subsets.append((gi, len(sel), int(counts.sum()), float(where.sum()), float((where * where).sum())))
+    return ((pk.kind, pk.threads, pk.software, pk.primitives, tuple(groups), tuple(subsets)),
+            np.array(sizes, np.int64))
+
+
+def _repeats(timed: dict, shape) -> int | None:
+    """An earlier timed pass with the same key each of whose groups has the same threads as in ``shape``, or
+    (a ``seq_pass`` group's nested sets, which only shrink) at most REPEAT_TOLERANCE more of them."""
+    if shape[0] not in timed:
+        return None
+    q, sizes_q = timed[shape[0]]
+    sizes = shape[1]
+    if ((sizes < 0) != (sizes_q < 0)).any():
+        return None
+    return q if (np.abs(sizes - sizes_q) <= REPEAT_TOLERANCE * np.abs(sizes_q)).all() else None
 
 
 def analytic_timing(result, work, gpu) -> dict:
@@ -165,12 +220,23 @@ def analytic_timing(result, work, gpu) -> dict:
     passes, total = [], 0
     overhead = pass_overhead_cycles(gpu)      # the driver issues each pass
     quad_memo = _QuadMemo()                   # passes over the same fragments (depth peeling's) share their quads
+    timed: dict[tuple, tuple] = {}            # a pass's key -> the last pass timed with it, its groups' threads
     for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
         if pk.kind == "flush":
             cyc = flush_cycles(c, -(-work.width * work.height // ws)) + overhead
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": 0, "bound": "flush"})
             total += cyc
             continue
+        shape = _pass_shape(pk, p, groups_of_pass[p], placement, plan, bases)
+        q = _repeats(timed, shape)
+        if q is not None:                     # (nearly) the same work as an earlier pass: timed once, counted again
+            for per_pass in (wis, alu, dram_bytes, atomic_ops, hottest, rop_unit):
+                per_pass[p] = per_pass[q]
+            used[p] = used[q]
+            passes.append(passes[q] | {"name": pk.name, "repeat_of": q})
+            total += passes[q]["cycles"]
+            continue
+        timed[shape[0]] = (p, shape[1])
         last_producer, waited = None, False
         chain = None                          # (first lane key, dependent-chain cycles per lane key from it)
         pass_keys: list = []                  # the lane keys of each group in the pass
@@ -180,7 +246,7 @@ def analytic_timing(result, work, gpu) -> dict:
             g = plan.groups[gi]
             li, cnt, where = placement[gi]
             sel = where[p]
-            if callable(sel):
+            if isinstance(sel, _StillIssuing):
                 sel = sel()
             n = len(g.thread)
             thread = g.thread_ids()
@@ -322,4 +388,5 @@ def analytic_timing(result, work, gpu) -> dict:
              for u in units_built if u in busy}
     return {"fidelity": "analytic", "gpu": gpu.name, "instructions": int(wis.sum()),
             "operations": int(plan.total_ops()), "passes": passes, "units_built": units_built, "units": units,
-            "rmw_hazards": None, "total": int(total)}
+            "rmw_hazards": None, "total": int(total),
+            "repeated_passes": sum("repeat_of" in x for x in passes)}

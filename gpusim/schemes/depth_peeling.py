@@ -99,8 +99,8 @@ class DepthPeeling(Scheme):
         at = lambda size: (lambda i, s: pix[i] * size)  # noqa: E731
         plan.add(0, "load", "peel_depth", frags, max(total - 1, 0), at(DEPTH_BYTES), DEPTH_BYTES,
                  seq_pass=2 * np.arange(1, max(total, 1)))
-        for p in range(1, total):     # each pass after the first: strictly behind the peeled depth, or discard
-            plan.compute(2 * p, frags, PEEL_TEST)
+        # each pass after the first: strictly behind the peeled depth, or discard
+        plan.compute(0, frags, PEEL_TEST, count=max(total - 1, 0), seq_pass=2 * np.arange(1, max(total, 1)))
         plan.add(0, "depth_test", "depth_buffer", frags, np.minimum(d + 1, peels), at(DEPTH_BYTES),
                  DEPTH_BYTES, dep=True, seq_pass=2 * np.arange(peels))
         peeled = np.minimum(lay, peels)
@@ -156,8 +156,8 @@ class DualDepthPeeling(Scheme):
         plan.add(0, "blend", "minmax_depth", frags, 1, lambda i, s: tex(i, s, 0), mm)
         plan.add(0, "load", "minmax_depth", frags, peels, lambda i, s: tex(i, s, s), mm,
                  seq_pass=np.arange(1, peels + 1))
-        for k in range(1, peels + 1):   # at the previous min (front), at its max (back), or strictly inside
-            plan.compute(k, frags, DUAL_PEEL_TEST)
+        # at the previous min (front), at its max (back), or strictly inside
+        plan.compute(0, frags, DUAL_PEEL_TEST, count=peels, seq_pass=np.arange(1, peels + 1))
         inside = np.minimum(m, peels)
         plan.add(0, "blend", "minmax_depth", frags, inside, lambda i, s: tex(i, s, s + 1), mm, dep=True,
                  seq_pass=np.arange(1, peels + 1))

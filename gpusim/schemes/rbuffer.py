@@ -121,10 +121,8 @@ class RBuffer(Scheme):
                  lambda i, s: slot(fifo_sequence(pos[i], s + 1, members)), SF, seq_pass=read_pass)
         plan.add(2, "depth_test", "second_z_buffer", stored, removal, lambda i, s: pix[stored[i]] * ZB, ZB,
                  dep=True, seq_pass=read_pass)
-        reading, left = stored, removal            # the fragments pass p reads, and the passes they stay for
-        for p in range(1, n_pass + 1):             # at the second z: blend and leave; else write back
-            plan.compute(1 + p, reading, RECIRCULATE_TEST)
-            reading, left = reading[left > p], left[left > p]
+        # every read: at the second z, blend and leave; else write back
+        plan.compute(2, stored, RECIRCULATE_TEST, count=removal, seq_pass=read_pass)
         vis_pos = np.flatnonzero(~occluded)
         plan.add(2, "blend", "framebuffer", stored[vis_pos], 1, lambda i, s: pix[stored[vis_pos[i]]] * fb_bytes,
                  fb_bytes, dep=True, pass_fn=lambda i, s: 1 + removal[vis_pos[i]])
