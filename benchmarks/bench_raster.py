@@ -187,13 +187,8 @@ def main() -> int:
     name, scene, base = workload()
     batch = scene_triangles(scene, base)
     w, h = scene.screen.width, scene.screen.height
-    rasterize(batch, w, h)  # warm-up
-    times = []
-    for _ in range(args.repeat):
-        start = time.perf_counter()
-        trace = rasterize(batch, w, h)
-        times.append(time.perf_counter() - start)
-    best = min(times)
+    trace = rasterize(batch, w, h)
+    best, _ = best_seconds(lambda: rasterize(batch, w, h), args.repeat)
     rate = len(trace) / best
     limit = min(len(batch), 5000)
     start = time.perf_counter()
