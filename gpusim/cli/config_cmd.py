@@ -24,14 +24,15 @@ def run(args) -> int:
     runs = expand(exp)
     given = {e.label: list(e.axes) for e in exp.schemes}
     sets = list(exp.gpu_set)
-    scene_sets = list(exp.scene_set)
+    scene_sets = list(dict.fromkeys(k for r in runs for k, _ in r.source.scene_set))
     head = ["#", "scene", *[f"scene.{k}" for k in scene_sets], "gpu", *sets, "fidelity", "scheme", "parameters",
             "note"]
     rows = []
     for r in runs:
         params = " ".join(f"{k}={r.params[k]}" for k in given[r.label]) or "defaults"
         scheme = r.scheme if r.label == r.scheme else f"{r.label} ({r.scheme})"
-        rows.append([str(r.index), r.source.label, *[str(v) for _, v in r.source.scene_set], r.gpu,
+        scene = dict(r.source.scene_set)
+        rows.append([str(r.index), r.source.label, *[str(scene.get(k, "")) for k in scene_sets], r.gpu,
                      *[str(v) for _, v in r.gpu_set], r.fidelity, scheme, params,
                      f"skipped: {r.skip}" if r.skip else ""])
     widths = [max(len(h), *(len(row[i]) for row in rows)) for i, h in enumerate(head)]

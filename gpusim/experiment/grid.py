@@ -90,18 +90,31 @@ def scene_overrides(exp, combo: tuple[tuple[str, Any], ...]) -> list[str]:
     return out
 
 
+def scene_axes(exp) -> list[tuple[str, str, str, list[tuple], str]]:
+    """(the entry as errors name it, the scene column, the scene spec, its scene-set combinations, the key
+    that gives them) for each ``scenes`` entry, then each ``[[scene-sweeps]]`` table (its own axes first,
+    then ``[scene-set]``'s)."""
+    from gpusim.experiment.spec import scene_label
+    out = [(f"scenes: {scene}", scene_label(scene), exp.scene_spec(scene), set_combinations(exp.scene_set),
+            "scene-set") for scene in exp.scenes]
+    for i, sweep in enumerate(exp.scene_sweeps):
+        out.append((f"scene-sweeps.{i}.scene: {sweep.scene}", sweep.name, exp.scene_spec(sweep.scene),
+                    set_combinations({**sweep.axes, **exp.scene_set}), f"scene-sweeps.{i}.set"))
+    return out
+
+
 def sources(exp) -> list[Source]:
-    out: list[Source] = []
-    for scene in exp.scenes:
-        spec = str(exp.resolve_path(scene)) if Path(scene).suffix else scene
-        for combo in set_combinations(exp.scene_set):
-            out.append(Source(Path(scene).stem if Path(scene).suffix else scene, "scene", spec,
-                              tuple(scene_overrides(exp, combo)), combo))
+    out: list[Source] = [Source(label, "scene", spec, tuple(scene_overrides(exp, combo)), combo)
+                         for _, label, spec, combos, _ in scene_axes(exp) for combo in combos]
     for trace in exp.traces:
         out.append(Source(Path(trace).stem, "trace", str(exp.resolve_path(trace))))
     named: dict[tuple, Source] = {}
     for source in out:
         other = named.setdefault((source.label, source.scene_set), source)
+        if other is not source and other == source:
+            values = " ".join(f"{k}={v!r}" for k, v in source.scene_set)
+            raise ConfigError(f"{exp.path}: scenes: '{source.label}'{' ' + values if values else ''} is listed twice "
+                              "(in scenes or [[scene-sweeps]]); give it once, or a sweep another name")
         if other.spec != source.spec or other.kind != source.kind:
             raise ConfigError(f"{exp.path}: scenes: '{other.spec}' and '{source.spec}' would both be the scene "
                               f"'{source.label}' in the results; list one, or rename a file")

@@ -56,7 +56,14 @@ TOP_KEYS = {
     "schemes": "one table per scheme: its parameters (a list is an axis)",
     "gpu-set": "GPU config overrides (a list is an axis)",
     "scene-set": "scene overrides applied to every scene (a list is an axis)",
+    "scene-sweeps": "[[scene-sweeps]] tables: a scene with its own override axes (scene, name, set)",
     "paper": "a paper comparison (gpusim.papers): the report opens with its Paper vs gpusim table",
+}
+#: keys of one ``[[scene-sweeps]]`` table
+SWEEP_KEYS = {
+    "scene": "a built-in scene name, scene file or mesh file",
+    "name": "the scene column of its runs (default: the scene's name)",
+    "set": "scene overrides for this scene only (a list is an axis), as in [scene-set]",
 }
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
@@ -68,6 +75,15 @@ class SchemeEntry:
     label: str
     scheme: str
     axes: dict[str, list[Any]]          # every parameter given; a fixed value is a list of one
+
+
+@dataclass(frozen=True)
+class SceneSweep:
+    """One ``[[scene-sweeps]]`` table: a scene swept over its own override axes."""
+
+    scene: str                           # as given: a built-in name, a scene file or a mesh file
+    name: str                            # the ``scene`` column of its runs
+    axes: dict[str, list[Any]]           # scene keys; a fixed value is a list of one
 
 
 @dataclass(frozen=True)
@@ -86,6 +102,7 @@ class Experiment:
     schemes: list[SchemeEntry] = field(default_factory=list)
     gpu_set: dict[str, list[Any]] = field(default_factory=dict)
     scene_set: dict[str, list[Any]] = field(default_factory=dict)
+    scene_sweeps: list[SceneSweep] = field(default_factory=list)
     data: dict = field(default_factory=dict)     # the resolved tree (overlays and --set applied)
 
     def resolved_data(self) -> dict:
@@ -95,9 +112,19 @@ class Experiment:
         for key in ("scenes", "traces", "gpus"):
             if key in data:
                 values = [data[key]] if isinstance(data[key], str) else data[key]
-                data[key] = [str(self.resolve_path(v).resolve()) if (Path(v).suffix and self.resolve_path(v).exists())
-                             else v for v in values]
+                data[key] = [self._absolute(v) for v in values]
+        for sweep, parsed in zip(data.get("scene-sweeps", []), self.scene_sweeps):
+            sweep["scene"] = self._absolute(sweep["scene"])
+            sweep["name"] = parsed.name
         return data
+
+    def _absolute(self, text: str) -> str:
+        return str(self.resolve_path(text).resolve()) if (Path(text).suffix and self.resolve_path(text).exists()) \
+            else text
+
+    def scene_spec(self, scene: str) -> str:
+        """What :func:`gpusim.scene.load_scene` takes for a ``scenes`` entry: a file resolved, a name as given."""
+        return str(self.resolve_path(scene)) if Path(scene).suffix else scene
 
     def resolve_path(self, text: str) -> Path:
         """A path from the file: relative to the experiment's folder if it exists there, else as given."""
@@ -105,6 +132,11 @@ class Experiment:
         if not path.is_absolute() and (self.base_dir / path).exists():
             return self.base_dir / path
         return path
+
+
+def scene_label(scene: str) -> str:
+    """The ``scene`` column of a ``scenes`` entry: a file's stem, or the built-in scene's name."""
+    return Path(scene).stem if Path(scene).suffix else scene
 
 
 def experiment_path(spec: str | None) -> Path:
@@ -169,6 +201,17 @@ def apply_experiment_overrides(data: dict, overrides: list[str]) -> dict:
             if not isinstance(data[parts[0]], dict):
                 raise ConfigError(f"--set {text}: '{parts[0]}' is not a table")
             data[parts[0]][".".join(parts[1:]).strip('"')] = value
+        elif parts[0] == "scene-sweeps" and len(parts) > 3 and parts[2] == "set":
+            sweeps = data.get("scene-sweeps")
+            if not isinstance(sweeps, list) or not parts[1].isdigit() or int(parts[1]) >= len(sweeps) \
+                    or not isinstance(sweeps[int(parts[1])], dict):
+                count = len(sweeps) if isinstance(sweeps, list) else 0
+                raise ConfigError(f"--set {text}: 'scene-sweeps.{parts[1]}' is not one of the file's {count} "
+                                  "[[scene-sweeps]] tables" + (f" (valid: 0..{count - 1})" if count else ""))
+            table = sweeps[int(parts[1])].setdefault("set", {})
+            if not isinstance(table, dict):
+                raise ConfigError(f"--set {text}: 'scene-sweeps.{parts[1]}.set' is not a table")
+            table[".".join(parts[3:]).strip('"')] = value
         else:
             plain.append(text)
     return apply_overrides(data, plain)
@@ -239,7 +282,11 @@ def _check_schemes(table: Any, where: str) -> list[SchemeEntry]:
 
 
 def _check_sets(data: dict, key: str, where: str) -> dict[str, list[Any]]:
-    table = data.get(key, {})
+    return _set_axes(data.get(key, {}), key, where)
+
+
+def _set_axes(table: Any, key: str, where: str) -> dict[str, list[Any]]:
+    """A ``[gpu-set]`` or ``[scene-set]``-style table (``key`` names it in errors) as axes."""
     if not isinstance(table, dict):
         raise ConfigError(f"{where}: {key}: expected a table of KEY = value or [values], e.g. [{key}]")
     out = {}
@@ -251,6 +298,32 @@ def _check_sets(data: dict, key: str, where: str) -> dict[str, list[Any]]:
         if key == "gpu-set" and k == "runner.workers" and len(out[k]) > 1:
             raise ConfigError(f"{where}: gpu-set.runner.workers: the number of processes changes no figure, so "
                               "its values would give identical runs; give one value")
+    return out
+
+
+def _check_sweeps(data: dict, scene_set: dict[str, list[Any]], where: str) -> list[SceneSweep]:
+    tables = data.get("scene-sweeps", [])
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise ConfigError(f"{where}: scene-sweeps: expected [[scene-sweeps]] tables, e.g. [[scene-sweeps]] "
+                          "scene = \"layer-stack\" set = { \"objects.0.layers\" = [1, 4] }")
+    out = []
+    for i, table in enumerate(tables):
+        at = f"scene-sweeps.{i}"
+        unknown = [k for k in table if k not in SWEEP_KEYS]
+        if unknown:
+            raise ConfigError(f"{where}: {at}.{unknown[0]}: unknown key (valid: {', '.join(SWEEP_KEYS)})")
+        scene = table.get("scene")
+        if not isinstance(scene, str) or not scene:
+            raise ConfigError(f"{where}: {at}.scene: expected a scene name or file, e.g. scene = \"layer-stack\"")
+        name = table.get("name", scene_label(scene))
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise ConfigError(f"{where}: {at}.name: {name!r} must be letters, digits, '.', '_' or '-' "
+                              "(it is the scene column of its runs)")
+        axes = _set_axes(table.get("set", {}), f"{at}.set", where)
+        both = [k for k in axes if k in scene_set]
+        if both:
+            raise ConfigError(f"{where}: {at}.set: {both[0]} is also in [scene-set]; give it in one of them")
+        out.append(SceneSweep(scene, name, axes))
     return out
 
 
@@ -267,8 +340,11 @@ def experiment_from_data(data: dict, where: str, base_dir: Path, default_name: s
     if not isinstance(description, str) or "\n" in description:
         raise ConfigError(f"{where}: description: expected one line of text")
     scenes, traces = _strings(data, "scenes", where), _strings(data, "traces", where)
-    if not scenes and not traces:
-        raise ConfigError(f"{where}: scenes: give scenes = [\"default\", ...] or traces = [\"traces/x.npz\"]")
+    scene_set = _check_sets(data, "scene-set", where)
+    sweeps = _check_sweeps(data, scene_set, where)
+    if not scenes and not traces and not sweeps:
+        raise ConfigError(f"{where}: scenes: give scenes = [\"default\", ...], traces = [\"traces/x.npz\"] or "
+                          "[[scene-sweeps]] tables")
     fidelity = _strings(data, "fidelity", where) if "fidelity" in data else ["full"]
     for level in fidelity:
         if level not in FIDELITY_CHOICES:
@@ -279,7 +355,7 @@ def experiment_from_data(data: dict, where: str, base_dir: Path, default_name: s
     if not gpus:
         raise ConfigError(f"{where}: gpus: an empty list leaves no runs (valid: {', '.join(gpu_presets())})")
     size = _parse_size(data["size"], where) if "size" in data else None
-    if size and traces and not scenes:
+    if size and traces and not scenes and not sweeps:
         raise ConfigError(f"{where}: size: a trace's screen is fixed; size applies to scenes only")
     if "paper" in data:
         from gpusim.papers import paper_names
@@ -289,30 +365,29 @@ def experiment_from_data(data: dict, where: str, base_dir: Path, default_name: s
     exp = Experiment(name=name, description=description, path=where, base_dir=base_dir, scenes=scenes,
                      traces=traces, size=size, gpus=gpus, fidelity=fidelity,
                      schemes=_check_schemes(data.get("schemes"), where),
-                     gpu_set=_check_sets(data, "gpu-set", where), scene_set=_check_sets(data, "scene-set", where),
+                     gpu_set=_check_sets(data, "gpu-set", where), scene_set=scene_set, scene_sweeps=sweeps,
                      data=data)
     _check_sources(exp)
     return exp
 
 
 def _check_sources(exp: Experiment) -> None:
-    """Every scene loads (with the size and scene-set values) and every trace file exists."""
-    from gpusim.experiment.grid import scene_overrides, set_combinations
+    """Every scene loads (with the size and scene-set or sweep values) and every trace file exists."""
+    from gpusim.experiment.grid import scene_axes, scene_overrides
     from gpusim.scene import load_scene
-    for scene in exp.scenes:
-        spec = str(exp.resolve_path(scene)) if Path(scene).suffix else scene
+    for entry, _, spec, combos, what in scene_axes(exp):
         try:
             load_scene(spec)                 # a problem of the scene itself
         except GpusimError as exc:
-            raise ConfigError(f"{exp.path}: scenes: {scene}: {exc}") from None
-        for combo in set_combinations(exp.scene_set):
+            raise ConfigError(f"{exp.path}: {entry}: {exc}") from None
+        scene = entry.partition(": ")[2]
+        for combo in combos:
             try:
                 load_scene(spec, scene_overrides(exp, combo))
             except GpusimError as exc:       # a problem of the experiment's overrides: name them, not the file
                 head, _, rest = str(exc).partition(": ")
                 text = (rest if Path(head).suffix else str(exc)).removeprefix("--set ")
-                what = "scene-set" if combo else "size"
-                raise ConfigError(f"{exp.path}: {what} on scene {scene}: {text}") from None
+                raise ConfigError(f"{exp.path}: {what if combo else 'size'} on scene {scene}: {text}") from None
     for trace in exp.traces:
         if not exp.resolve_path(trace).is_file():
             raise ConfigError(f"{exp.path}: traces: {trace}: no such file (make it with gpusim trace, "
