@@ -157,6 +157,7 @@ def _group_passes(g):
 
 
 REPEAT_TOLERANCE = 0.01    # a pass whose groups each differ from a timed pass's by at most this share of their threads
+VOLUME_BOUNDS = ("issue", "raster", "dram", "atomic")   # bounds that grow with all of a pass's operations
 
 
 def _pass_shape(pk, p: int, groups: list[int], placement, plan, bases) -> tuple[tuple, np.ndarray]:
@@ -179,20 +180,26 @@ def _pass_shape(pk, p: int, groups: list[int], placement, plan, bases) -> tuple[
                      bases[g.structure] + np.asarray(g.offset(lanes, np.zeros(len(lanes), np.int64)), np.float64))
             counts = np.asarray(g.instructions)[lanes] if g.is_compute else placement[gi][1][sel]
             subsets.append((gi, len(sel), int(counts.sum()), float(where.sum()), float((where * where).sum())))
+    threads = sum(len(placement[gi][0]) if n < 0 else n for gi, n in zip(groups, sizes))
     return ((pk.kind, pk.threads, pk.software, pk.primitives, tuple(groups), tuple(subsets)),
-            np.array(sizes, np.int64))
+            np.array(sizes, np.int64), threads)
 
 
 def _repeats(timed: dict, shape) -> int | None:
     """An earlier timed pass with the same key each of whose groups has the same threads as in ``shape``, or
-    (a ``seq_pass`` group's nested sets, which only shrink) at most REPEAT_TOLERANCE more of them."""
+    (a ``seq_pass`` group's nested sets, which only shrink) at most REPEAT_TOLERANCE more of them; or, when
+    a bound that grows with the whole pass's work decided that pass (VOLUME_BOUNDS), at most
+    REPEAT_TOLERANCE of its threads more in all."""
     if shape[0] not in timed:
         return None
-    q, sizes_q = timed[shape[0]]
+    q, sizes_q, threads_q, bound_q = timed[shape[0]]
     sizes = shape[1]
     if ((sizes < 0) != (sizes_q < 0)).any():
         return None
-    return q if (np.abs(sizes - sizes_q) <= REPEAT_TOLERANCE * np.abs(sizes_q)).all() else None
+    more = np.abs(sizes - sizes_q)
+    if (more <= REPEAT_TOLERANCE * np.abs(sizes_q)).all():
+        return q
+    return q if bound_q in VOLUME_BOUNDS and more.sum() <= REPEAT_TOLERANCE * threads_q else None
 
 
 def analytic_timing(result, work, gpu) -> dict:
@@ -236,7 +243,6 @@ def analytic_timing(result, work, gpu) -> dict:
             passes.append(passes[q] | {"name": pk.name, "repeat_of": q})
             total += passes[q]["cycles"]
             continue
-        timed[shape[0]] = (p, shape[1])
         last_producer, waited = None, False
         chain = None                          # (first lane key, dependent-chain cycles per lane key from it)
         pass_keys: list = []                  # the lane keys of each group in the pass
@@ -379,6 +385,7 @@ def analytic_timing(result, work, gpu) -> dict:
         cyc = int(np.ceil(bounds[limit])) + max(lat[u] for u in used[p]) + overhead
         passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": n_warps, "bound": limit})
         total += cyc
+        timed[shape[0]] = (p, shape[1], shape[2], limit)
     units_built = [name for name, cls in (("dram", MEM), ("atomic", ATOMIC), ("rop", ROP), ("scoreboard", SCOREBOARD))
                    if any(cls in u for u in used)]
     busy = {"dram": dram_bytes.sum() / gpu.dram.bytes_per_cycle, "atomic": atomic_ops.sum() / gpu.atomic.ops_per_cycle,
