@@ -20,8 +20,9 @@ from gpusim.atomic_io import atomic_folder, write_text_atomic
 from gpusim.errors import GpusimError
 from gpusim.report import figures
 from gpusim.report.check import check_tables
-from gpusim.report.tables import (best_level, fidelity_errors, fidelity_summary, fmt, markdown, one_per_functional,
-                                  structure_table, unit_utilisation, with_labels)
+from gpusim.report.tables import (MISORDER_STATS, best_level, drop_cases, drop_summary, fidelity_errors,
+                                  fidelity_summary, fmt, markdown, most_faithful, one_per_functional, per_fragment,
+                                  scene_sweeps, structure_table, unit_utilisation, with_labels)
 
 IMAGES_PER_FIGURE = 11
 IMAGE_SCENES = 3            # scenes whose images the report draws (the rest stay under runs/)
@@ -133,6 +134,80 @@ class _Report:
                 self.figure(path, section.title)
             if section.table is not None and len(section.table):
                 self.add(markdown(section.table, section.table_kinds), "")
+
+    def stability(self) -> None:
+        """Image error and run time per fragment against each scene sweep's key, image error against cycles
+        over every scene, and the cases where a scheme drops or misorders fragments; only when the experiment
+        sweeps a scene key (``[[scene-sweeps]]`` or ``[scene-set]``)."""
+        scene_set = list(self.meta.get("scene-set", {}))
+        order = {s["name"]: [*s.get("set", {}), *scene_set] for s in self.meta.get("scene-sweeps", []) if "name" in s}
+        sweeps = scene_sweeps(self.labelled, order)
+        if not sweeps:
+            return
+        level = self.level or "none"
+        runs, fallback = most_faithful(self.labelled)
+        runs = per_fragment(runs)
+        cycles = (f"Cycles are the **{level}** level's" if level != "none" else "No run was timed (level none)")
+        self.add("## Stability: the schemes against the scene", "",
+                 "Each scheme on scenes swept over scene keys ("
+                 + "; ".join(f"`{scene}`: " + ", ".join(f"`{c.removeprefix('scene.')}`" for c in columns)
+                             for scene, columns in sweeps)
+                 + "; a sweep's first key is the x axis of its figures, any other gives one figure per value), "
+                 f"and on the experiment's other scenes. {cycles}; run time per fragment is the simulated cycles "
+                 "per fragment and the simulator's own wall time (functional model plus that timing level, on the "
+                 "machine that ran the sweep, so it varies with that machine's load) per fragment. Depth "
+                 "complexity is the trace's fragments per covered pixel.", "")
+        if len(fallback):
+            self.add(f"Where a scene and configuration has no finished {level} run, its most faithful finished "
+                     "run stands in (see *Skipped and failed runs* for why): "
+                     + "; ".join(f"{r.setting} `{r.config}` ({r.fidelity})" for r in fallback.itertuples()) + ".",
+                     "")
+        if runs.empty:
+            self.add("No run finished.", "")
+            return
+        self.add("### Image error against simulated cycles, every scheme", "")
+        if runs["cycles"].isna().all():
+            self.add("No run has simulated cycles (the experiment ran `fidelity = [\"none\"]` only).", "")
+        else:
+            path = figures.error_vs_cycles_all(runs, level, f"image error against cycles, every scene ({level} level)",
+                                               self.figdir / "stability-error-vs-cycles.png")
+            self.figure(path, "image error against simulated cycles, every scheme and scene")
+            self.add(f"One point per scene and configuration ({len(runs)} runs over "
+                     f"{runs['scene_label'].nunique()} scenes); left: the run's cycles, right: per fragment.", "")
+        for scene, columns in sweeps:
+            x, others = columns[0], columns[1:]
+            key = x.removeprefix("scene.")
+            self.add(f"### `{scene}`: against `{key}`", "")
+            rows = runs[runs["scene"] == scene]
+            groups = rows.groupby(others, sort=False, dropna=False) if others else [((), rows)]
+            for values, part in groups:
+                values = values if isinstance(values, tuple) else (values,)
+                fixed = " ".join(f"{c.removeprefix('scene.')}={fmt(v)}" for c, v in zip(others, values))
+                name = f"{scene} {fixed}".strip()
+                path = figures.sweep(part, x, key, level, f"{name}: against {key}",
+                                     self.figdir / f"stability-{_slug(name)}.png")
+                self.figure(path, f"image error and run time per fragment against {key}, {name}")
+                self.add(f"Depth complexity (fragments per covered pixel) of {name}: "
+                         + "; ".join(f"{key}={fmt(v)}: {fmt(d)}" for v, d in
+                                     part.drop_duplicates(x)[[x, "depth_complexity"]].itertuples(index=False))
+                         + ".", "")
+                for column, what in (("rmse", "RMSE"), ("cycles_per_fragment", "simulated cycles per fragment"),
+                                     ("wall_us_per_fragment", "wall µs per fragment")):
+                    table = part.pivot_table(index="config", columns=x, values=column, sort=False, dropna=False)
+                    table.columns = [f"{key}={fmt(c)}" for c in table.columns]
+                    self.add(f"{what}, {name}:", "", markdown(table, index=True), "")
+        self.add("### Dropped and misordered fragments", "",
+                 "Per scheme configuration over every scene of the sweep: the cases (scenes) where it dropped "
+                 "fragments (`dropped_fragments`), composited them out of depth order (the sum of the scheme "
+                 f"statistics {', '.join(f'`{s}`' for s in MISORDER_STATS)} where the scheme has them, and "
+                 f"RMW hazards at the {level} level), or left an image that differs from the exact reference "
+                 "(any channel by more than 1/255: a scheme without an ordering count, such as alpha-blend or "
+                 "wboit, shows its misordering and approximation here only).", "")
+        self.add(markdown(drop_summary(runs), {"largest rmse": ""}), "")
+        cases = drop_cases(runs)
+        self.add(f"Every such case ({len(cases)} of {len(runs)} runs):", "",
+                 "<details><summary>cases</summary>", "", markdown(cases) if len(cases) else "None.", "",
+                 "</details>", "")
 
     def error_against_time(self) -> None:
         self.add("## Error against run time", "")
@@ -328,6 +403,7 @@ class _Report:
             old.unlink()
         self.header()
         self.paper()
+        self.stability()
         self.error_against_time()
         self.run_table()
         self.cycles()

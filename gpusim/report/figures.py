@@ -72,13 +72,18 @@ def error_vs_cycles(points: pd.DataFrame, level: str, title: str, path: Path) ->
                       else f"simulated cycles ({level} level, shader clock)")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.25)
-    handles, labels = fig.axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=min(8, len(labels)), frameon=False)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(labels) / 8), 1, 1))
+    _legend_below(fig, 8)
     for ax, items in axes_labels:
         _place_labels(fig, ax, items)
     return save(fig, path)
+
+
+def _legend_below(fig: Figure, columns: int) -> None:
+    """The first axes' legend in ``columns`` columns under the axes, then the layout fitted above it."""
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=min(columns, len(labels)), frameon=False)
+    fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(labels) / columns), 1, 1))
 
 
 def _place_labels(fig: Figure, ax, items: list[tuple]) -> None:
@@ -240,3 +245,73 @@ def grouped_bars(chart: pd.DataFrame, ylabel: str, title: str, path: Path, log: 
     fig.tight_layout(rect=(0, 0.03 + 0.04 * -(-len(groups) // 6), 1, 1))
     return save(fig, path)
 
+
+
+#: the panels of a sweep figure: (column, y label, y scale)
+SWEEP_PANELS = (("rmse", "RMSE against the exact reference (RGB in [0, 1])", "symlog"),
+                ("cycles_per_fragment", "simulated cycles per fragment", "log"),
+                ("wall_us_per_fragment", "simulator wall time per fragment (µs, this machine)", "log"))
+
+
+def sweep(points: pd.DataFrame, x: str, xlabel: str, level: str, title: str, path: Path) -> Path:
+    """Image error, simulated cycles per fragment and the simulator's wall time per fragment against a swept
+    scene key ``x``, one line per configuration (``points``: one row per configuration and value, with
+    :func:`gpusim.report.tables.per_fragment`'s columns). A numeric ``x`` spanning a decade or more is drawn
+    on a log axis; any other is drawn in the order of its values."""
+    values = list(dict.fromkeys(points[x]))
+    numeric = all(isinstance(v, (int, float, np.integer, np.floating)) for v in values)
+    position = (lambda v: v) if numeric else {v: i for i, v in enumerate(values)}.get
+    configs = list(dict.fromkeys(points["config"]))
+    colours = _colours(configs)
+    markers = "osD^v<>pP*Xh"
+    fig = Figure(figsize=(13, 4.8))
+    for ax, (column, label, scale) in zip(fig.subplots(1, 3), SWEEP_PANELS):
+        for i, config in enumerate(configs):
+            rows = points[points["config"] == config]
+            xs = np.array([position(v) for v in rows[x]], dtype=float)
+            order = np.argsort(xs, kind="stable")
+            ax.plot(xs[order], rows[column].to_numpy(dtype=float)[order], marker=markers[i % len(markers)],
+                    markersize=4, linewidth=1.0, color=colours[config], label=config)
+        if scale == "symlog":
+            ax.set_yscale("symlog", linthresh=1e-3)
+            ax.set_ylim(bottom=0)
+        else:
+            ax.set_yscale(scale)
+        if numeric and min(values) > 0 and max(values) >= 10 * min(values):
+            ax.set_xscale("log")
+            ax.set_xticks(values, [f"{v:g}" for v in values])
+            ax.minorticks_off()
+        elif not numeric:
+            ax.set_xticks(range(len(values)), [str(v) for v in values], fontsize=8)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(True, which="both", alpha=0.25)
+    fig.suptitle(f"{title} (cycles: {level} level)", fontsize=10)
+    _legend_below(fig, 7)
+    return save(fig, path)
+
+
+def error_vs_cycles_all(points: pd.DataFrame, level: str, title: str, path: Path) -> Path:
+    """Image error (RMSE) against simulated cycles and against cycles per fragment over every scene of
+    ``points`` (one point per run, with :func:`gpusim.report.tables.per_fragment`'s columns), one colour per
+    configuration."""
+    fig = Figure(figsize=(12, 5.2))
+    configs = list(dict.fromkeys(points["config"]))
+    colours = _colours(configs)
+    markers = "osD^v<>pP*Xh"
+    unit = "thesis model" if level == "thesis" else f"{level} level, shader clock"
+    for ax, column, xlabel in zip(fig.subplots(1, 2), ("cycles", "cycles_per_fragment"),
+                                  (f"simulated cycles ({unit})", f"simulated cycles per fragment ({unit})")):
+        for i, config in enumerate(configs):
+            rows = points[points["config"] == config]
+            ax.scatter(rows[column], rows["rmse"], s=22, color=colours[config], marker=markers[i % len(markers)],
+                       edgecolors="black", linewidths=0.3, label=config, zorder=3)
+        ax.set_xscale("log")
+        ax.set_yscale("symlog", linthresh=1e-3)
+        ax.set_ylim(bottom=0)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("RMSE against the exact reference (RGB in [0, 1])")
+        ax.grid(True, which="both", alpha=0.25)
+    fig.suptitle(title, fontsize=10)
+    _legend_below(fig, 7)
+    return save(fig, path)

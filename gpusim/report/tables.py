@@ -59,13 +59,11 @@ def with_labels(results: pd.DataFrame) -> pd.DataFrame:
                                + [f"{c}={_value(row[c])}" for c in vary_gpu]) or row["gpu"]
                       for _, row in out.iterrows()]
     vary_scene = _varying(out, scene_set)
-    out["setting"] = [" ".join([row["scene"], *[f"{c.removeprefix('scene.')}={_value(row[c])}" for c in vary_scene],
-                                row["machine"]]) for _, row in out.iterrows()]
-    out["scene_label"] = [" ".join([row["scene"], *[f"{c.removeprefix('scene.')}={_value(row[c])}"
-                                                     for c in vary_scene]]) for _, row in out.iterrows()]
-    out["functional"] = [" ".join([row["scene"], *[f"{c.removeprefix('scene.')}={_value(row[c])}"
-                                                    for c in vary_scene], row["config"]])
-                         for _, row in out.iterrows()]
+    scene_label = [" ".join([row["scene"], *[f"{c.removeprefix('scene.')}={_value(row[c])}" for c in vary_scene
+                                             if not pd.isna(row[c])]]) for _, row in out.iterrows()]
+    out["setting"] = [f"{label} {machine}" for label, machine in zip(scene_label, out["machine"])]
+    out["scene_label"] = scene_label
+    out["functional"] = [f"{label} {config}" for label, config in zip(scene_label, out["config"])]
     return out
 
 
@@ -194,3 +192,95 @@ def markdown(frame: pd.DataFrame, kinds: dict[str, str] | None = None, index: bo
         lines.append("| " + " | ".join(fmt(row[c], kinds.get(str(c), "")).replace("|", "/") for c in data.columns)
                      + " |")
     return "\n".join(lines)
+
+
+#: scheme stats that count fragments composited (or whose colour was kept) out of depth order; each stat's
+#: own description is in stats.parquet
+MISORDER_STATS = ("misordered_pairs", "invalid_samples", "packing_order_inversions", "tie_blends",
+                  "colour_collisions")
+
+
+def most_faithful(labelled: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(one finished run per setting and configuration at the most faithful level it finished, in grid order;
+    those of them below :func:`best_level`'s level). ``labelled`` has :func:`with_labels`' columns."""
+    ok = labelled[labelled["status"] == "ok"]
+    level = best_level(labelled, timed_only=False)
+    rank = {lv: i for i, lv in enumerate((*LEVEL_ORDER, "none"))}
+    if level == "thesis":       # thesis cycles only where no GPU level ran: never mixed with a GPU's
+        ok = ok[ok["fidelity"].isin(["thesis", "none"])]
+    else:
+        ok = ok[ok["fidelity"] != "thesis"]
+    first = ok.assign(_rank=ok["fidelity"].map(rank)).sort_values(["_rank", "index"], kind="stable")
+    runs = first.drop_duplicates(["setting", "config"]).sort_values("index", kind="stable").drop(columns="_rank")
+    return runs, runs[runs["fidelity"] != level]
+
+
+def per_fragment(runs: pd.DataFrame) -> pd.DataFrame:
+    """``runs`` with ``depth_complexity`` (fragments per covered pixel), ``cycles_per_fragment`` and
+    ``wall_us_per_fragment`` (the functional model's and the timing level's wall time, µs) added."""
+    fragments = runs["fragments"].where(runs["fragments"] > 0)
+    wall = runs["wall_seconds_functional"].fillna(0.0) + runs["wall_seconds_timing"].fillna(0.0)
+    return runs.assign(depth_complexity=fragments / runs["pixels"].where(runs["pixels"] > 0),
+                       cycles_per_fragment=runs["cycles"] / fragments,
+                       wall_us_per_fragment=1e6 * wall / fragments)
+
+
+def scene_sweeps(labelled: pd.DataFrame, key_order: dict[str, list[str]] | None = None) -> list[tuple[str, list[str]]]:
+    """Each scene (the ``scene`` column) whose finished runs vary a scene-set column, with the columns it
+    varies: in ``key_order[scene]``'s order (scene keys as the experiment lists them; the first is the x axis
+    of its figures), then the table's."""
+    _, _, scene_set = axis_columns(labelled)
+    ok = labelled[labelled["status"] == "ok"]
+    out = []
+    for scene, rows in ok.groupby("scene", sort=False):
+        vary = _varying(rows, scene_set)
+        if vary:
+            first = [f"scene.{k}" for k in (key_order or {}).get(scene, [])]
+            out.append((scene, sorted(vary, key=lambda c: first.index(c) if c in first else len(first))))
+    return out
+
+
+def misordered(runs: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
+    """(count, the stats that counted it) per run: the sum of the :data:`MISORDER_STATS` columns it has
+    (NaN where its scheme has none of them)."""
+    columns = [f"stat.{s}" for s in MISORDER_STATS if f"stat.{s}" in runs]
+    if not columns:
+        return pd.Series(math.nan, index=runs.index), pd.Series("", index=runs.index, dtype=object)
+    values = runs[columns]
+    count = values.sum(axis=1, min_count=1)
+    names = values.notna().apply(lambda row: ", ".join(c.removeprefix("stat.") for c in row.index[row]), axis=1)
+    return count, names
+
+
+def drop_cases(runs: pd.DataFrame) -> pd.DataFrame:
+    """The runs (with :func:`with_labels`' columns) where a scheme drops fragments, composites them out of
+    depth order (a :data:`MISORDER_STATS` count, or RMW hazards) or leaves a wrong image: one row each with
+    the counts, ordered by scheme table then grid order."""
+    count, names = misordered(runs)
+    frame = pd.DataFrame({"scene": runs["scene_label"], "config": runs["config"],
+                          "dropped": runs["dropped_fragments"], "overflowed px": runs["overflowed_pixels"],
+                          "misordered": count, "counted by": names, "hazards": runs["hazards"],
+                          "differing px": runs["differing_pixels"], "rmse": runs["rmse"]}, index=runs.index)
+    wrong = (frame[["dropped", "misordered", "hazards", "differing px"]].fillna(0) > 0).any(axis=1)
+    order = {v: i for i, v in enumerate(dict.fromkeys(runs["variant"]))}
+    return frame[wrong].assign(_v=runs["variant"].map(order)).sort_values("_v", kind="stable").drop(columns="_v")
+
+
+def drop_summary(runs: pd.DataFrame) -> pd.DataFrame:
+    """Per scheme configuration over ``runs``: cases run, cases (and fragments) dropped, cases (and counts)
+    misordered, cases with hazards, cases with a wrong image, and the largest RMSE with its scene."""
+    count, _ = misordered(runs)
+    frame = runs.assign(_mis=count)
+    rows = []
+    for config, r in frame.groupby("config", sort=False):
+        worst = r["rmse"].idxmax() if r["rmse"].notna().any() else None
+        rows.append({"config": config, "cases": len(r),
+                     "dropping cases": int((r["dropped_fragments"].fillna(0) > 0).sum()),
+                     "fragments dropped": r["dropped_fragments"].sum(min_count=1),
+                     "misordering cases": int((r["_mis"].fillna(0) > 0).sum()),
+                     "misordered": r["_mis"].sum(min_count=1),
+                     "hazard cases": int((r["hazards"].fillna(0) > 0).sum()),
+                     "wrong-image cases": int((r["differing_pixels"].fillna(0) > 0).sum()),
+                     "largest rmse": r["rmse"].max(),
+                     "on": r.loc[worst, "scene_label"] if worst is not None and r.loc[worst, "rmse"] > 0 else "-"})
+    return pd.DataFrame(rows)
