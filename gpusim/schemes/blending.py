@@ -48,6 +48,7 @@ from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, PREMULTIPLY, WBOIT_RESOLVE, WBOIT_WEIGHT
+from gpusim.schemes.common.arrays import lex_order
 from gpusim.schemes.common.fold import fold
 from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, rounder
@@ -68,15 +69,15 @@ def _opaque_prepass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colour
     colour = np.empty((P, 3), np.float32)
     colour[:] = trace.background.astype(np.float32)
     if len(op_idx):
-        nearest = op_idx[np.lexsort((op_idx, g.key[op_idx], pix[op_idx]))]
-        first = np.r_[True, pix[nearest][1:] != pix[nearest][:-1]]
-        winners = nearest[first]
-        zbuf[pix[winners]] = g.key[winners]
-        colour[pix[winners]] = colour_round(trace.rgba[winners, :3])
+        by_pix = op_idx[lex_order(pix[op_idx])]                # op_idx ascends: submission order per pixel
+        pix_sorted, key_sorted = pix[by_pix], g.key[by_pix]
         # colour stores: opaque fragments that pass LESS against the earlier opaque ones
-        by_pix = op_idx[np.argsort(pix[op_idx], kind="stable")]
-        before = segment_running_min_before(pix[by_pix], g.key[by_pix])
-        writes = by_pix[g.key[by_pix] < before]
+        passes = key_sorted < segment_running_min_before(pix_sorted, key_sorted)
+        writes = by_pix[passes]
+        # the last write at a pixel is its nearest opaque fragment (first submitted among equals)
+        winners = writes[np.r_[pix[writes][1:] != pix[writes][:-1], True]]
+        zbuf[pix[winners]] = g.key[winners]
+        colour[pix[winners]] = colour_round(np.take(trace.rgba[:, :3], winners, axis=0))
     else:
         writes = op_idx
     plan.add(pass_index, "depth_test", "depth_buffer", op_idx, 1, lambda i, s: pix[op_idx[i]] * DEPTH_BYTES,
@@ -117,13 +118,13 @@ class AlphaBlend(Scheme):
         b_idx = np.flatnonzero(blended)
         plan.add(len(passes) - 1, "blend", "framebuffer", b_idx, 1, lambda i, s: pix[b_idx[i]] * cb, cb,
                  dep=prepass)
-        rgb, alpha = trace.rgba[:, :3], g.alpha
-
-        def step(state, f):
-            a = alpha[f][:, None]
-            return rnd(a * rgb[f] + (1 - a) * state)
-
         order = g.by_arrival[blended[g.by_arrival]]
+        rgb, alpha = np.take(trace.rgba[:, :3], order, axis=0), g.alpha[order]   # in arrival order
+
+        def step(state, i):
+            a = alpha[i][:, None]
+            return rnd(a * np.take(rgb, i, axis=0) + (1 - a) * state)
+
         image = fold(pix, order, colour, step)
         struct = [Structure("framebuffer", cb, P, g.covered, f"{self.framebuffer_format} colour")]
         if prepass:
@@ -221,13 +222,15 @@ class WeightedBlendedOIT(Scheme):
         state = np.zeros((P, 5), np.float32)
         state[:, 4] = 1.0
 
-        def step(s, f):
+        order = g.by_arrival[blended[g.by_arrival]]
+        premul, alpha = np.take(premul, order, axis=0), alpha[order]   # in arrival order
+
+        def step(s, i):
             out = np.empty_like(s)
-            out[:, :4] = acc_round(s[:, :4] + premul[f])
-            out[:, 4] = rev_round(s[:, 4] * (1 - alpha[f]))
+            out[:, :4] = acc_round(s[:, :4] + np.take(premul, i, axis=0))
+            out[:, 4] = rev_round(s[:, 4] * (1 - alpha[i]))
             return out
 
-        order = g.by_arrival[blended[g.by_arrival]]
         state = fold(pix, order, state, step)
         reveal = state[:, 4:5]
         overflow = int(np.count_nonzero(~np.isfinite(state[:, :4]).all(axis=1)))

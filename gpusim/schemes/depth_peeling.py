@@ -48,19 +48,12 @@ from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.common.alu import COMPOSITE, DUAL_PEEL_TEST, PEEL_TEST
+from gpusim.schemes.common.arrays import lex_order
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
 Termination = Literal["known-layers", "occlusion-query", "fixed"]
-
-
-def _layers(g: PixelGroups) -> np.ndarray:
-    """Distinct depths per pixel."""
-    lay = np.zeros(g.pixel_count, np.int64)
-    if g.n:
-        np.maximum.at(lay, g.pix, g.distinct_rank + 1)
-    return lay
 
 
 @register("depth-peeling")
@@ -78,7 +71,7 @@ class DepthPeeling(Scheme):
         g = PixelGroups(trace)
         n, P = len(trace), trace.pixel_count
         pix, d = g.pix, g.distinct_rank
-        lay = _layers(g)
+        lay = g.layers
         need = int(lay.max(initial=0))
         if self.termination == "fixed" and not self.max_passes:
             raise GpusimError("depth-peeling: termination = 'fixed' runs max_passes passes; set max_passes >= 1 "
@@ -140,7 +133,7 @@ class DualDepthPeeling(Scheme):
         g = PixelGroups(trace)
         n, P = len(trace), trace.pixel_count
         pix, d = g.pix, g.distinct_rank
-        lay = _layers(g)
+        lay = g.layers
         e = lay[pix] - 1 - d                      # distinct rank from the back
         m = np.minimum(d, e)                      # peeled in pass m + 1
         need = -(-int(lay.max(initial=0)) // 2)
@@ -177,7 +170,7 @@ class DualDepthPeeling(Scheme):
         idx = np.flatnonzero(peeled)
         is_back = ~front[idx]
         tiebreak = np.where(is_back, -idx, idx)
-        order = idx[np.lexsort((tiebreak, g.key[idx], pix[idx]))]
+        order = idx[lex_order(pix[idx], g.key[idx], tiebreak)]
         struct = [Structure("minmax_depth", mm, 2 * P, 2 * g.covered, "two ping-pong RG32F (-min, max) textures"),
                   Structure("front_colour", cb, P, g.covered, "front-to-back accumulated colour"),
                   Structure("back_colour", cb, P, g.covered, "back-to-front accumulated colour")]

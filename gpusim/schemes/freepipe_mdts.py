@@ -55,10 +55,10 @@ from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_image, register
 from gpusim.schemes.common.alu import COMPOSITE, PACK_DEPTH_COLOUR, UNPACK_RGBA8, UNPACK_SPLIT_RGB24
-from gpusim.schemes.common.arrays import (Layout, count_before_in_pixel, entry_index, pixel_key, rank_in_runs,
-                                          smallest_per_pixel)
+from gpusim.schemes.common.arrays import (Layout, count_before_in_pixel, entry_index, rank_in_runs,
+                                          reversed_runs, smallest_per_pixel)
 from gpusim.schemes.common.depthkey import EMPTY, colour24, colour24_rgb, packed_depth
-from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.groups import PixelGroups, distinct_ids
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, store_colour
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
@@ -117,7 +117,9 @@ class FreePipeMDTS(Scheme):
             storable = value != empty
             sort_value = value if self.direction == "min" else np.uint32(0xFFFFFFFF) - value
             every = bool(storable.all())
-            kept[name] = smallest_per_pixel(pix, sort_value, L, None if every else np.flatnonzero(storable))
+            by_key = every and not self.packing and self.direction == "min"    # sort_value is the depth key
+            kept[name] = smallest_per_pixel(pix, sort_value, L, None if every else np.flatnonzero(storable),
+                                            g.by_depth if by_key else None)
             # a chain ends at the first empty entry: one atomic per entry filled before it + 1, at most L
             before = g.arrival if every else count_before_in_pixel(pix, g.by_arrival, storable)
             filled_before = np.minimum(before, L)
@@ -174,12 +176,15 @@ class FreePipeMDTS(Scheme):
         P, L, n, pix = trace.pixel_count, self.layers, len(trace), g.pix
         cb = COLOUR_BYTES[self.colour_format]
         slot_of_kept = rank_in_runs(pix[kd])
-        combined = pixel_key(pix, g.key)
+        value = np.empty(n, np.int64)          # id of each fragment's (pixel, depth) value
+        value[g.by_depth] = distinct_ids(pix[g.by_depth], g.key[g.by_depth])[0]
         # equal values sit next to each other in the array: the first occurrence is the lowest slot
-        uniq, first = np.unique(combined[kd], return_index=True)
-        pos = np.minimum(np.searchsorted(uniq, combined), max(len(uniq) - 1, 0))
-        found = (uniq[pos] == combined) if len(uniq) else np.zeros(n, bool)
-        entry = np.where(found, first[pos] if len(uniq) else 0, -1)
+        kept_value = value[kd]
+        first = np.flatnonzero(np.r_[True, kept_value[1:] != kept_value[:-1]]) if len(kd) else kd
+        entry_of_value = np.full(n, -1, np.int64)
+        entry_of_value[kept_value[first]] = first
+        entry = entry_of_value[value]          # the entry holding the fragment's value, or -1
+        found = entry >= 0
         # loads: walk until own value (slot + 1 loads) or to the end of the array (L loads)
         slot = np.where(found, slot_of_kept[np.maximum(entry, 0)] if len(kd) else 0, L - 1)
         layout = self.layout
@@ -243,6 +248,5 @@ class FreePipeMDTS(Scheme):
 
     @staticmethod
     def _reverse_runs(pix, order, rgba):
-        p = pix[order]
-        key = np.lexsort((-np.arange(len(order)), p))
+        key = reversed_runs(pix[order])
         return order[key], rgba[key]

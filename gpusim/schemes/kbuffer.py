@@ -153,7 +153,7 @@ class KBuffer(Scheme):
                                              "consecutively composited fragments in the wrong depth order")
             used = int(np.minimum(g.count, k).sum())
         else:
-            order = smallest_per_pixel(pix, g.key, k)
+            order = smallest_per_pixel(pix, g.key, k, order=g.by_depth)
             kept_count = len(order)
             used = kept_count
         image = composite_stored(t, pix, order, self.colour_format)

@@ -45,7 +45,7 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import RECIRCULATE_TEST
-from gpusim.schemes.common.arrays import pixel_key
+from gpusim.schemes.common.arrays import lex_order, reversed_runs
 from gpusim.schemes.common.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
 from gpusim.schemes.common.fold import fold
 from gpusim.schemes.common.groups import PixelGroups, distinct_rank_in_runs
@@ -53,12 +53,13 @@ from gpusim.schemes.common.weights import unorm_rounder
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
 
-def far_rank(pix: np.ndarray, key: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """For fragments ``idx``: how many distinct depths of their pixel (among ``idx``) lie behind them."""
-    order = np.argsort(pixel_key(pix[idx], ~key[idx]), kind="stable")
+def far_rank(pix: np.ndarray, key: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For fragments ``idx``: how many distinct depths of their pixel (among ``idx``) lie behind them; and
+    the order of ``idx`` grouped by pixel, farthest first (equal depths in ``idx`` order)."""
+    order = lex_order(pix[idx], ~key[idx])
     rank = np.empty(len(idx), np.int64)
     rank[order] = distinct_rank_in_runs(pix[idx][order], key[idx][order])
-    return rank
+    return rank, order
 
 
 def fifo_sequence(pos: np.ndarray, pass_no: np.ndarray, members: np.ndarray) -> np.ndarray:
@@ -108,7 +109,8 @@ class RBuffer(Scheme):
         shift = np.zeros(P, np.int64)
         shift[pix[stored[occluded]]] = 1
         removal = np.ones(n_f, np.int64)                         # 1-based pass in which it leaves
-        removal[~occluded] = shift[pix[vis_idx]] + far_rank(pix, g.key, vis_idx) + 1
+        rank, back_to_front = far_rank(pix, g.key, vis_idx)
+        removal[~occluded] = shift[pix[vis_idx]] + rank + 1
         n_pass = int(removal.max(initial=0))
         members = np.bincount(removal, minlength=n_pass + 1)[::-1].cumsum()[::-1][1:]   # reads per pass
         plan.passes.extend(Pass(f"recirculate {p}", "buffer", "fragment") for p in range(1, n_pass + 1))
@@ -130,13 +132,12 @@ class RBuffer(Scheme):
                  lambda i, s: slot(fifo_sequence(pos[i], s + 2, members)), SF, dep=True, seq_pass=read_pass)
 
         # image: back to front, equal depths in FIFO order, rounded after every blend (Eq. 1)
-        blend_order = vis_idx[np.lexsort((vis_idx, ~g.key[vis_idx], pix[vis_idx]))]
-        rgba = np.zeros((n, 4), np.float32)
-        rgba[stored] = rnd(trace.rgba[stored])
+        blend_order = vis_idx[back_to_front]
+        rgba = rnd(np.take(trace.rgba, blend_order, axis=0))     # in blending order
 
-        def step(state, f):
-            a = rgba[f, 3:4]
-            return rnd(a * rgba[f, :3] + (1 - a) * state)
+        def step(state, i):
+            a = rgba[i, 3:4]
+            return rnd(a * rgba[i, :3] + (1 - a) * state)
 
         image = fold(pix, blend_order, ez.opaque_rgb.copy(), step).reshape(trace.height, trace.width, 3)
         same = np.r_[False, (pix[blend_order][1:] == pix[blend_order][:-1])
@@ -151,8 +152,7 @@ class RBuffer(Scheme):
                       f"{self.state_bits} bits of pixel state per pixel (no accesses modelled)"),
         ]
         storage = storage_bytes(struct)
-        front_to_back = blend_order[::-1]
-        front_to_back = front_to_back[np.argsort(pix[front_to_back], kind="stable")]
+        front_to_back = blend_order[reversed_runs(pix[blend_order])]
         stats = {
             "recirculation_passes": Stat(n_pass, "passes", "FIFO passes until the R-buffer is empty"),
             "storage_system_bytes": Stat(storage, "bytes", "Table 4-2 total: R-buffer + second z-buffer + "

@@ -27,6 +27,7 @@ import numpy as np
 
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OpPlan
+from gpusim.schemes.common.arrays import lex_order
 from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.common.storage import DEPTH_BYTES
 from gpusim.schemes.result import Stat, Structure
@@ -75,7 +76,7 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
     writes = np.flatnonzero(opaque & (key < before))            # opaque fragments passing LESS
     if len(writes):
         # the last write at a pixel is its nearest opaque fragment (first submitted among equals)
-        last = writes[np.lexsort((writes, pix[writes]))]
+        last = writes[lex_order(pix[writes])]   # writes ascend: ties stay in submission order
         is_last = np.r_[pix[last][1:] != pix[last][:-1], True]
         winners = last[is_last]
         opaque_rgb[pix[winners]] = colour_round(trace.rgba[winners, :3])

@@ -1,8 +1,10 @@
 """Per-pixel sequential updates in submission order (ROP blending), vectorised over pixels.
 
-``fold`` applies ``step(state_rows, fragments)`` once per arrival rank: at rank j
+``fold`` applies ``step(state_rows, positions)`` once per arrival rank: at rank j
 every pixel with more than j fragments updates its state with its j-th
-fragment. This is how fixed-function blending with per-step rounding (an RGBA8
+fragment, found at those positions of the arrival order (``by_arrival[positions]``
+are the fragments; a step reads arrays gathered into arrival order once, so a
+trace in random order costs no random gather per step). This is how fixed-function blending with per-step rounding (an RGBA8
 framebuffer, an RGBA16F accumulation target) is reproduced exactly without a
 Python loop over fragments.
 """
@@ -18,7 +20,10 @@ from gpusim.metrics.composite import runs_by_length
 
 def fold(pix: np.ndarray, by_arrival: np.ndarray, state: np.ndarray,
          step: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
-    """Update ``state`` (indexed by pixel id) with each pixel's fragments in arrival order."""
+    """Update ``state`` (indexed by pixel id) with each pixel's fragments in arrival order.
+
+    ``step(state_rows, positions)`` gets positions into ``by_arrival``, not fragment indices.
+    """
     if len(by_arrival) == 0:
         return state
     pix_sorted = pix[by_arrival]
@@ -26,6 +31,6 @@ def fold(pix: np.ndarray, by_arrival: np.ndarray, state: np.ndarray,
     covered = pix_sorted[start]
     for j, m in enumerate(active):
         rows = covered[:m]
-        state[rows] = step(state[rows], by_arrival[start[:m] + j])
+        state[rows] = step(state[rows], start[:m] + j)
     return state
 

@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from gpusim.schemes.common.arrays import pixel_key, rank_in_runs
+from gpusim.schemes.common.arrays import lex_order, pixel_key, rank_in_runs
 from gpusim.schemes.common.depthkey import depth_key
 from gpusim.schemes.common.storage import effective_alpha
 from gpusim.trace import FragmentTrace
@@ -51,7 +51,7 @@ class PixelGroups:
     @cached_property
     def by_arrival(self) -> np.ndarray:
         """Fragment indices grouped by pixel (ascending), submission order inside a pixel."""
-        return np.argsort(self.pix, kind="stable")
+        return lex_order(self.pix)
 
     @cached_property
     def arrival(self) -> np.ndarray:
@@ -61,15 +61,29 @@ class PixelGroups:
     @cached_property
     def by_depth(self) -> np.ndarray:
         """Fragment indices grouped by pixel, nearest first, equal depths in submission order."""
-        return np.argsort(pixel_key(self.pix, self.key), kind="stable")
+        return lex_order(self.pix, self.key)
 
     @cached_property
     def distinct_rank(self) -> np.ndarray:
         """0-based rank of each fragment's depth among the distinct depths of its pixel."""
-        order = self.by_depth
         rank = np.empty(self.n, np.int64)
-        rank[order] = distinct_rank_in_runs(self.pix[order], self.key[order])
+        rank[self.by_depth] = self._distinct_rank_by_depth
         return rank
+
+    @cached_property
+    def _distinct_rank_by_depth(self) -> np.ndarray:
+        order = self.by_depth
+        return distinct_rank_in_runs(self.pix[order], self.key[order])
+
+    @cached_property
+    def layers(self) -> np.ndarray:
+        """Distinct depths of each pixel, (pixel_count,) int64."""
+        lay = np.zeros(self.pixel_count, np.int64)
+        if self.n:
+            pix_sorted = self.pix[self.by_depth]
+            last = np.r_[pix_sorted[1:] != pix_sorted[:-1], True]
+            lay[pix_sorted[last]] = self._distinct_rank_by_depth[last] + 1
+        return lay
 
     def _rank_in_runs(self, order: np.ndarray) -> np.ndarray:
         rank = np.empty(self.n, np.int64)
@@ -77,14 +91,21 @@ class PixelGroups:
         return rank
 
 
+def distinct_ids(pix_sorted: np.ndarray, key_sorted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For grouped runs with keys in order: a 0-based id of each distinct (pixel, key), ascending, and where
+    each run starts."""
+    if len(pix_sorted) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    new_pixel = np.r_[True, pix_sorted[1:] != pix_sorted[:-1]]
+    new_value = new_pixel | np.r_[True, key_sorted[1:] != key_sorted[:-1]]
+    return np.cumsum(new_value) - 1, np.flatnonzero(new_pixel)
+
+
 def distinct_rank_in_runs(pix_sorted: np.ndarray, key_sorted: np.ndarray) -> np.ndarray:
     """For grouped runs with keys in order: the 0-based rank of each key among its run's distinct keys."""
     if len(pix_sorted) == 0:
         return np.zeros(0, np.int64)
-    new_pixel = np.r_[True, pix_sorted[1:] != pix_sorted[:-1]]
-    new_value = new_pixel | np.r_[True, key_sorted[1:] != key_sorted[:-1]]
-    steps = np.cumsum(new_value) - 1                    # distinct values so far, global
-    start = np.flatnonzero(new_pixel)
+    steps, start = distinct_ids(pix_sorted, key_sorted)     # distinct values so far, global
     return steps - np.repeat(steps[start], np.diff(np.r_[start, len(pix_sorted)]))
 
 

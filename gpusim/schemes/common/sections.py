@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.common.arrays import rank_in_runs
+from gpusim.schemes.common.arrays import lex_order, rank_in_runs
 
 
 @dataclass(eq=False)
@@ -82,18 +82,23 @@ def place(pix: np.ndarray, by_arrival: np.ndarray, n: int, capacity: int,
 
 
 class SectionIndex:
-    """Look up the section id of (pixel, position in the pixel's chain)."""
+    """Look up the section id of (pixel, position in the pixel's chain).
+
+    A pixel's chain positions are 0, 1, ..., so the sections sorted by (pixel, position) put
+    (p, c) at ``first[p] + c``: a lookup is two gathers, whatever the order of the queries.
+    """
 
     def __init__(self, pixel: np.ndarray, chain: np.ndarray, section: np.ndarray):
-        self.stride = int(chain.max(initial=-1)) + 1
-        key = pixel.astype(np.int64) * self.stride + chain
-        order = np.argsort(key, kind="stable")
-        self.keys = key[order]
+        order = lex_order(pixel, chain)
+        pixel_sorted = np.asarray(pixel, np.int64)[order]
+        if not np.array_equal(np.asarray(chain)[order], rank_in_runs(pixel_sorted)):
+            raise ValueError("SectionIndex: a pixel's chain positions must be 0, 1, ... without gaps")
+        counts = np.bincount(pixel_sorted)
+        self.first = np.cumsum(counts) - counts
         self.ids = np.asarray(section, np.int64)[order]
 
     def __call__(self, pixel: np.ndarray, chain: np.ndarray) -> np.ndarray:
-        pos = np.searchsorted(self.keys, np.asarray(pixel, np.int64) * self.stride + chain)
-        return self.ids[pos]
+        return self.ids[self.first[pixel] + chain]
 
 
 def read_runs(pix: np.ndarray, kept_by_arrival: np.ndarray, pixel_count: int

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.metrics.composite import run_starts
-from gpusim.schemes.common.arrays import pixel_key
+from gpusim.schemes.common.arrays import lex_order
 
 _PAD = np.uint64(1) << np.uint64(40)
 
@@ -52,7 +52,7 @@ def sort_runs(pix: np.ndarray, key: np.ndarray, method: str) -> tuple[np.ndarray
     """
     n = len(pix)
     if method == "insertion":
-        perm = np.argsort(pixel_key(pix, key), kind="stable")   # stable: equal depths keep load order
+        perm = lex_order(pix, key)   # stable: equal depths keep load order
         return perm, _insertion_compares(pix, key)
     if method != "bitonic":
         raise ValueError(f"unknown sort {method!r} (valid: insertion, bitonic)")
