@@ -37,9 +37,10 @@ import numpy as np
 
 from gpusim.hw.core import SimtCore, flush_cycles
 from gpusim.hw.driver import pass_overhead_cycles
-from gpusim.hw.lower import PRODUCES, split_by, submitted_triangles, thread_mapping
+from gpusim.hw.lower import PRODUCES, scoreboard_warps, split_by, submitted_triangles, thread_mapping
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_triangle_cycles
+from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
 
@@ -97,6 +98,35 @@ def _warp_max(values: np.ndarray, ws: int) -> np.ndarray:
     if pad:
         values = np.concatenate([values, np.zeros(pad, values.dtype)])
     return values.reshape(-1, ws).max(axis=1)
+
+
+class _Packing:
+    """How a pass's lanes fill warps: ``ws`` consecutive lanes a warp, or (a pass behind the scoreboard)
+    as dispatch packs them, no two fragments of one cell in a warp (gpusim.hw.lower)."""
+
+    def __init__(self, ws: int, keys: np.ndarray | None = None, warp: np.ndarray | None = None):
+        self.ws, self.keys, self.warp = ws, keys, warp
+
+    def runs(self, keys: np.ndarray) -> np.ndarray:
+        """Start of each warp's run in ``keys`` (ascending lane keys of the pass)."""
+        if self.warp is None:
+            return np.arange(0, len(keys), self.ws)
+        return run_starts(self.warp[np.searchsorted(self.keys, keys)])
+
+    def warp_max(self, values: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        """Per warp, the largest of its lanes' ``values`` (one per key of ``keys``)."""
+        if self.warp is None:
+            return _warp_max(values, self.ws)
+        return np.maximum.reduceat(values, self.runs(keys)) if len(values) else values
+
+    def warp_rank(self, keys: np.ndarray, of: np.ndarray) -> np.ndarray:
+        """The warp (its rank among the warps of ``keys``) of each key in ``of``."""
+        pos = np.searchsorted(keys, of)
+        if self.warp is None:
+            return pos // self.ws
+        starts = np.zeros(len(keys), np.int64)
+        starts[self.runs(keys)] = 1
+        return (np.cumsum(starts) - 1)[pos]
 
 
 def _warp_sample(lanes: np.ndarray, ws: int, warps: int = 4096) -> np.ndarray:
@@ -158,6 +188,32 @@ def _group_passes(g):
 
 REPEAT_TOLERANCE = 0.01    # a pass whose groups each differ from a timed pass's by at most this share of their threads
 VOLUME_BOUNDS = ("issue", "raster", "dram", "atomic")   # bounds that grow with all of a pass's operations
+
+
+def _pass_packing(plan, groups: list[int], placement, p: int, work, gpu) -> _Packing:
+    """Consecutive lanes, or the scoreboard dispatch's packing when a group of the pass goes through it."""
+    for gi in groups:
+        g = plan.groups[gi]
+        if g.op == "scoreboard":
+            sel = placement[gi][2][p]
+            sel = sel() if isinstance(sel, _StillIssuing) else sel
+            keys = np.unique(g.thread_ids() if sel is None else g.thread_ids()[placement[gi][0][sel]])
+            return _Packing(gpu.core.warp_size, keys, scoreboard_warps(work.frag_pixel[keys], work.width, gpu))
+    return _Packing(gpu.core.warp_size)
+
+
+def _scoreboard_bound(held: list, keys: np.ndarray, wchain: np.ndarray, packing: "_Packing",
+                      entries: int) -> float:
+    """The scoreboard's serialisation: a warp holds its fragments' cells for its whole latency chain, so the
+    fragments of one cell run one warp after another (the busiest cell's sum of its warps' chains), and
+    the warps in flight hold at most ``entries`` cells at once (cell-cycles held over the entries)."""
+    worst = 0.0
+    for held_keys, cells in held:
+        warp = packing.warp_rank(keys, held_keys)
+        worst = max(worst, float(np.bincount(cells, weights=wchain[warp]).max(initial=0.0)))
+        pairs = np.unique(warp * (int(cells.max(initial=0)) + 1) + cells)      # (warp, cell) held
+        worst = max(worst, float(wchain[pairs // (int(cells.max(initial=0)) + 1)].sum()) / entries)
+    return worst
 
 
 def _pass_shape(pk, p: int, groups: list[int], placement, plan, bases) -> tuple[tuple, np.ndarray]:
@@ -246,6 +302,8 @@ def analytic_timing(result, work, gpu) -> dict:
         last_producer, waited = None, False
         chain = None                          # (first lane key, dependent-chain cycles per lane key from it)
         pass_keys: list = []                  # the lane keys of each group in the pass
+        held: list = []                       # scoreboard groups: (lane keys, cell of each)
+        packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
         lane_cache: list = []                 # [(threads, (lanes, first key, keys, threads per lane, present,
                                               #             warp max))]
         for gi in groups_of_pass[p]:          # in program order
@@ -276,7 +334,7 @@ def analytic_timing(result, work, gpu) -> dict:
                 size = int(lanes.max()) + 1 - lo
                 threads_in = np.bincount(lanes - lo, minlength=size)
                 present = np.flatnonzero(threads_in)
-                got = (lanes, lo, size, threads_in, present, _warp_max(threads_in[present], ws).sum())
+                got = (lanes, lo, size, threads_in, present, packing.warp_max(threads_in[present], lo + present).sum())
                 cached.append((thread, got))
             lanes, lo, size, threads_in, present, warp_threads = got
             pass_keys.append(lo + present)
@@ -284,7 +342,7 @@ def analytic_timing(result, work, gpu) -> dict:
             uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
             per_lane = threads_in * c0 if uniform else np.bincount(lanes - lo, weights=counts, minlength=size)
             # warp instructions: lanes in order, each warp issues its busiest lane's count
-            busiest = warp_threads * c0 if uniform else _warp_max(per_lane[present], ws).sum()
+            busiest = warp_threads * c0 if uniform else packing.warp_max(per_lane[present], lo + present).sum()
             if compute:
                 alu[p] += busiest * c.issue_cycles
             else:
@@ -321,6 +379,10 @@ def analytic_timing(result, work, gpu) -> dict:
                 svc = (gpu.blender.cycles_per_op + (nb or 0) / gpu.blender.bytes_per_cycle
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
                 rop_unit[p] += np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
+            elif cls == SCOREBOARD:
+                keys_live = thread[lanes_live]
+                held.append((keys_live, scoreboard_cell(work.frag_pixel[keys_live], work.width,
+                                                        gpu.scoreboard.granularity)))
             # dependent chains per lane: every operation issues; a dependent producer waits for each result,
             # and the first dependent operation after a producer waits once per thread
             add = per_lane * (c.issue_cycles if compute else cost)
@@ -345,9 +407,9 @@ def analytic_timing(result, work, gpu) -> dict:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"})
             total += overhead
             continue
-        lane_chain = chain[1]
-        lane_chain = lane_chain[lane_chain > 0]       # every lane issues, so a present lane has a chain
-        wchain = _warp_max(lane_chain, ws)
+        present = np.flatnonzero(chain[1] > 0)        # every lane issues, so a present lane has a chain
+        lane_chain = chain[1][present]
+        wchain = packing.warp_max(lane_chain, chain[0] + present)
         n_warps = len(wchain)
         sm = SimtCore.place(n_warps, c.sms)
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
@@ -360,9 +422,11 @@ def analytic_timing(result, work, gpu) -> dict:
             "atomic_address": hottest[p] * gpu.atomic.same_address_cycles,
             "rop": float(rop_unit[p].max()),
         }
+        if held:
+            bounds["scoreboard"] = _scoreboard_bound(held, chain[0] + present, wchain, packing, gpu.scoreboard.entries)
         mapping = thread_mapping(gpu, pk)
         keys = _lane_keys(pass_keys) if mapping in ("fragment", "triangle") else np.zeros(0, np.int64)
-        if mapping == "fragment" and len(keys):
+        if mapping == "fragment" and len(keys) and packing.warp is None:
             # the front end sees every triangle; the pixel shader runs 4 lanes per 2x2 quad (helper lanes)
             quads = quad_memo.quads(keys, work)
             bounds["issue"] *= max(1.0, 4 * quads / len(keys))

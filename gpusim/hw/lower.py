@@ -254,7 +254,7 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         quads = None
         if any(plan.groups[pc.group].op == "scoreboard" for pc in ps):
             pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
-            warp_of_lane = _scoreboard_warps(pix, work.width, gpu)
+            warp_of_lane = scoreboard_warps(pix, work.width, gpu)
         elif mode == "fragment":
             # the rasterizer emits 2x2 quads: 4 shader lanes per quad, helper lanes of partial quads included
             quads = _quads_so_far(work, lane_keys)
@@ -466,7 +466,7 @@ def submitted_triangles(pk, work: Workload) -> int:
     return pk.primitives if pk.primitives is not None else work.triangles
 
 
-def _scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:
+def scoreboard_warps(pixel: np.ndarray, width: int, gpu) -> np.ndarray:
     """Warp of each lane when dispatch packs no two fragments of one scoreboard cell into a warp.
 
     The dispatcher fills a warp in submission order and starts a new one at a
