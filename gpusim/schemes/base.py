@@ -88,5 +88,5 @@ def composite_stored(trace: FragmentTrace, pix: np.ndarray, order: np.ndarray, c
     Colours are rounded to ``colour_format``; opaque fragments count as alpha 1.
     ``pix`` is the pixel id of every fragment of ``trace``.
     """
-    rgba = store_colour(trace.rgba[order], colour_format)
+    rgba = store_colour(np.take(trace.rgba, order, axis=0), colour_format)   # take: rows faster than [order]
     return composite_image(trace, pix[order], rgba, effective_alpha(rgba, trace.opaque[order]))

@@ -62,7 +62,7 @@ from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import (COMPARE_EXCHANGE, COMPOSITE, KEY_COMPARE_EXCHANGE, SHARED_ATOMIC,
                                        bitonic_compares)
-from gpusim.schemes.common.arrays import rank_in_runs
+from gpusim.schemes.common.arrays import lex_order, rank_in_runs, unique_ids
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.depthkey import depth_key
 from gpusim.schemes.common.groups import PixelGroups
@@ -85,11 +85,11 @@ TRANSMITTANCE_LIMIT = np.float32(1.0 / 128)   # a pixel is opaque once blended a
 
 def sorted_arrival(pix, centroid_key, tb_block, tb_tri, tb_of_frag):
     """Per-block rank of each tri-block (front to back) and the pixel arrival order it gives."""
-    order = np.lexsort((tb_tri, centroid_key, tb_block))
+    order = lex_order(tb_block, centroid_key, tb_tri)
     rank = np.empty(len(order), np.int64)
     rank[order] = rank_in_runs(tb_block[order])
     frag_rank = rank[tb_of_frag]
-    return frag_rank, np.lexsort((frag_rank, pix))
+    return frag_rank, lex_order(pix, frag_rank)
 
 
 def crossing_arrival(pix, emitted, steps, alpha, count):
@@ -99,12 +99,13 @@ def crossing_arrival(pix, emitted, steps, alpha, count):
         return out
     start, _, active = runs_by_length(pix[emitted])
     covered = pix[emitted][start]
+    alpha = alpha[emitted]                  # in emission order
     trans = np.ones(len(start), np.float32)
     done = np.zeros(len(start), bool)
     limit = TRANSMITTANCE_LIMIT
     for k, m in enumerate(active):
         idx = start[:m] + k
-        trans[:m] *= np.float32(1.0) - alpha[emitted[idx]]
+        trans[:m] *= np.float32(1.0) - alpha[idx]
         hit = ~done[:m] & (trans[:m] <= limit) & (steps[idx] < count[covered[:m]])
         out[covered[:m][hit]] = steps[idx][hit]
         done[:m] |= trans[:m] <= limit
@@ -153,7 +154,8 @@ class LucidRaster(Scheme):
         descent[1:] = (ep[1:] == ep[:-1]) & (ek[1:] < ek[:-1])
         invalid_pixels = int(len(np.unique(ep[descent])))
 
-        image = composite_runs(ep, trace.rgba[emitted, :3], g.alpha[emitted], P, trace.background,
+        rgb = np.take(trace.rgba[:, :3], emitted, axis=0)
+        image = composite_runs(ep, rgb, g.alpha[emitted], P, trace.background,
                                np.float32).reshape(trace.height, trace.width, 3)
 
         # bin classification
@@ -199,7 +201,7 @@ class LucidRaster(Scheme):
         """Samples never shaded because their half-block reached the alpha threshold first."""
         n, pix = len(trace), g.pix
         # position of each sample in its half-block's processing order
-        hb_order = np.lexsort((trace.x, -trace.y.astype(np.int64), frag_rank, half_block))
+        hb_order = lex_order(half_block, frag_rank, -trace.y.astype(np.int64), trace.x)
         pos = np.empty(n, np.int64)
         pos[hb_order] = rank_in_runs(half_block[hb_order])
         cross = crossing_arrival(pix, emitted, steps, g.alpha, g.count)
@@ -238,7 +240,7 @@ class LucidRaster(Scheme):
         # binning: persistent workgroups take batches of BINNING_BATCH triangles, count each (bin, triangle) pair
         # with a shared-memory atomic, then add each batch's count of a bin to the global counter once; the
         # write pass reserves each batch's run of a bin's list the same way, then stores the pairs
-        batch_bin, leader = np.unique(pb_tri // BINNING_BATCH * B + pb_bin, return_index=True)
+        batch_bin, leader, _ = unique_ids(pb_tri // BINNING_BATCH * B + pb_bin)
         plan.compute(1, len(pb_bin), SHARED_ATOMIC)
         plan.add(1, "atomic_inc", "bin_counts", leader, 1, lambda i, s: batch_bin[i] % B * 4, 4, dep=True)
         plan.add(2, "load", "bin_counts", B, 1, lambda i, s: i * 4, 4)

@@ -94,6 +94,54 @@ def rank_in_runs(pix_sorted: np.ndarray) -> np.ndarray:
     return np.arange(len(pix_sorted)) - np.repeat(start, np.diff(np.r_[start, len(pix_sorted)]))
 
 
+def unique_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``np.unique(values, return_index=True, return_inverse=True)`` for integers, sorted by
+    :func:`lex_order`: the distinct values ascending, the first index of each, and each value's id."""
+    values = np.asarray(values)
+    order = lex_order(values)
+    ordered = values[order]
+    new = np.empty(len(values), bool)
+    new[:1] = True
+    np.not_equal(ordered[1:], ordered[:-1], out=new[1:])
+    inverse = np.empty(len(values), np.intp)
+    inverse[order] = np.cumsum(new) - 1
+    return ordered[new], order[new], inverse
+
+
+def sort_within_runs(pix_sorted: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """Permutation sorting each run of a grouped ``pix_sorted`` by ``key`` (integers), ties in place
+    order, the runs staying where they are (``lex_order(pix_sorted, key)`` when they ascend).
+
+    The runs stay where they are, so one value sort does it: (run, key, rank in run) packed in
+    a uint64 (when they fit) holds a position without the index beside it.
+    """
+    n = len(pix_sorted)
+    if n == 0:
+        return np.zeros(0, np.intp)
+    key = np.asarray(key)
+    if key.dtype.kind not in "iu":
+        raise TypeError(f"sort_within_runs: keys must be integers, not {key.dtype}")
+    start = run_starts(pix_sorted)
+    length = np.diff(np.r_[start, n])
+    lo, hi = int(key.min()), int(key.max())
+    rank_bits = int(length.max() - 1).bit_length()
+    key_bits = (hi - lo).bit_length()
+    run_bits = (len(start) - 1).bit_length()
+    run = np.repeat(np.arange(len(start), dtype=np.uint64), length)
+    if run_bits + key_bits + rank_bits > 64:
+        return lex_order(run, key)
+    rank = np.arange(n, dtype=np.uint64) - np.repeat(start.astype(np.uint64), length)
+    if key.dtype.kind == "u":
+        field = key.astype(np.uint64) - np.uint64(lo)
+    else:
+        field = (key.astype(np.int64) - np.int64(lo)).view(np.uint64)
+    packed = (run << np.uint64(key_bits + rank_bits)) | (field << np.uint64(rank_bits)) | rank
+    packed.sort()
+    rank_mask = np.uint64((1 << rank_bits) - 1)
+    return (start[(packed >> np.uint64(key_bits + rank_bits)).astype(np.intp)]
+            + (packed & rank_mask).astype(np.intp))
+
+
 def reversed_runs(pix_sorted: np.ndarray) -> np.ndarray:
     """Permutation reversing the order inside each run of a grouped array (the runs stay where they are)."""
     start = run_starts(pix_sorted)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
+from gpusim.schemes.common.arrays import lex_order
 
 _NONE = np.iinfo(np.int64).max
 
@@ -34,7 +35,7 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
         return (empty, empty) if return_steps else empty
     pix_sorted = pix[by_arrival]
     start_c, count_c, active = runs_by_length(pix_sorted)
-    arrival_pos = np.arange(n, dtype=np.int64)          # position in by_arrival breaks ties by arrival
+    key_sorted = key[by_arrival].astype(np.int64)      # in arrival order
     # queue entries: (key << 32 | position) so argmin = nearest, then earliest; _NONE = empty slot
     queue = np.full((len(start_c), capacity + 1), _NONE, np.int64)
     emitted_pos = np.empty(n, np.int64)
@@ -42,7 +43,7 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
     out = 0
     for j, m in enumerate(active):
         pos = start_c[:m] + j
-        entry = (key[by_arrival[pos]].astype(np.int64) << 32) | arrival_pos[pos]
+        entry = (key_sorted[pos] << 32) | pos          # position in by_arrival breaks ties by arrival
         if j < capacity:
             queue[:m, j] = entry
             continue
@@ -62,7 +63,7 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
     emitted_pos[out:out + m_rest] = drained
     emitted_step[out:out + m_rest] = count_c[rows] + np.broadcast_to(np.arange(capacity), rest.shape)[valid]
     pixel_of = pix_sorted[emitted_pos]
-    order = np.lexsort((emitted_step, pixel_of))
+    order = lex_order(pixel_of, emitted_step)
     if return_steps:
         return by_arrival[emitted_pos[order]], emitted_step[order]
     return by_arrival[emitted_pos[order]]

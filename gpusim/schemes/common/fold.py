@@ -4,9 +4,10 @@
 every pixel with more than j fragments updates its state with its j-th
 fragment, found at those positions of the arrival order (``by_arrival[positions]``
 are the fragments; a step reads arrays gathered into arrival order once, so a
-trace in random order costs no random gather per step). This is how fixed-function blending with per-step rounding (an RGBA8
-framebuffer, an RGBA16F accumulation target) is reproduced exactly without a
-Python loop over fragments.
+trace in random order costs no random gather per step). This is how
+fixed-function blending with per-step rounding (an RGBA8 framebuffer, an
+RGBA16F accumulation target) is reproduced exactly without a Python loop over
+fragments.
 """
 
 from __future__ import annotations

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gpusim.schemes.common.arrays import lex_order, unique_ids
+
 BIN = 32
 BLOCK = 8
 HALF_BLOCK_H = 4
@@ -69,12 +71,12 @@ def pairs(region: np.ndarray, tri: np.ndarray, tris: int) -> tuple[np.ndarray, n
     Pairs come sorted by region, then triangle index (submission order).
     """
     key = np.asarray(region, np.int64) * max(tris, 1) + tri
-    uniq, inverse = np.unique(key, return_inverse=True)
-    return uniq // max(tris, 1), uniq % max(tris, 1), inverse.reshape(-1)
+    uniq, _, inverse = unique_ids(key)
+    return uniq // max(tris, 1), uniq % max(tris, 1), inverse
 
 
 def grouped(keys: np.ndarray, groups: int) -> tuple[np.ndarray, np.ndarray]:
     """Stable order of ``keys`` (group ids) and the start of each group in it."""
-    order = np.argsort(keys, kind="stable")
+    order = lex_order(keys)
     counts = np.bincount(keys, minlength=groups)
     return order, np.cumsum(counts) - counts

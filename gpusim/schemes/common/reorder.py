@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpusim.schemes.common.arrays import lex_order, unique_ids
 from gpusim.trace import FragmentTrace
 
 
@@ -19,14 +20,12 @@ def centroid_order(trace: FragmentTrace) -> np.ndarray:
     n = len(trace)
     if n == 0:
         return np.zeros(0, np.int64)
-    prims, inverse = np.unique(trace.prim, return_inverse=True)
+    prims, first, inverse = unique_ids(trace.prim)
     depth_sum = np.bincount(inverse, weights=trace.z.astype(np.float64), minlength=len(prims))
     count = np.bincount(inverse, minlength=len(prims))
-    first = np.full(len(prims), n, np.int64)
-    np.minimum.at(first, inverse, np.arange(n))
     prim_rank = np.empty(len(prims), np.int64)
     prim_rank[np.lexsort((first, depth_sum / count))] = np.arange(len(prims))
-    return np.lexsort((np.arange(n), prim_rank[inverse]))
+    return lex_order(prim_rank[inverse])
 
 
 def batch_index(trace: FragmentTrace, order: np.ndarray, batch_size: int) -> np.ndarray:

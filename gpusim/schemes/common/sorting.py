@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.metrics.composite import run_starts
-from gpusim.schemes.common.arrays import lex_order
+from gpusim.schemes.common.arrays import sort_within_runs
 
 _PAD = np.uint64(1) << np.uint64(40)
 
@@ -52,7 +52,7 @@ def sort_runs(pix: np.ndarray, key: np.ndarray, method: str) -> tuple[np.ndarray
     """
     n = len(pix)
     if method == "insertion":
-        perm = lex_order(pix, key)   # stable: equal depths keep load order
+        perm = sort_within_runs(pix, key)   # stable: equal depths keep load order
         return perm, _insertion_compares(pix, key)
     if method != "bitonic":
         raise ValueError(f"unknown sort {method!r} (valid: insertion, bitonic)")
@@ -94,7 +94,8 @@ def _insertion_compares(pix: np.ndarray, key: np.ndarray) -> int:
     for m, start, length in _classes(pix):
         if m == 1:
             continue
-        mat, valid, _ = _matrix(key.astype(np.uint64), start, length, m, _PAD)
+        # every compare below involves valid entries only: the padding's value never counts
+        mat, valid, _ = _matrix(key, start, length, m, key.dtype.type(0))
         inversions = 0
         for d in range(1, m):
             both = valid[:, d:]      # valid[:, :-d] is implied where the later one is valid
