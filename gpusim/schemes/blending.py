@@ -58,11 +58,12 @@ OpaqueMode = Literal["prepass", "blend"]
 REVEALAGE_BYTES = {"r8": 1, "r16f": 2, "r32f": 4}
 
 
-def _opaque_prepass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colour_bytes: int,
-                    colour_round) -> tuple[np.ndarray, np.ndarray, int]:
-    """Depth-tested opaque pass: (colour image (P, 3), mask of transparent fragments it lets through, culled)."""
+def depth_tested_pass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colour_bytes: int,
+                      colour_round, opaque: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+    """Depth-tested opaque pass (depth test LESS, then a colour store) of the ``opaque`` fragments (default:
+    the trace's): (colour image (P, 3), mask of transparent fragments it lets through, culled)."""
     P = trace.pixel_count
-    opaque = trace.opaque
+    opaque = trace.opaque if opaque is None else opaque
     op_idx = np.flatnonzero(opaque)
     pix = g.pix
     zbuf = np.full(P, np.uint64(1) << np.uint64(32))
@@ -107,7 +108,7 @@ class AlphaBlend(Scheme):
             [Pass("transparent", "geometry", "fragment")]
         plan = OpPlan(passes, (["depth_buffer"] if prepass else []) + ["framebuffer"])
         if prepass:
-            colour, blended, culled = _opaque_prepass(trace, g, plan, 0, cb, rnd)
+            colour, blended, culled = depth_tested_pass(trace, g, plan, 0, cb, rnd)
             colour = rnd(colour)   # the cleared background is held in the framebuffer's format too
             t_idx = np.flatnonzero(~trace.opaque)
             plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
@@ -193,7 +194,7 @@ class WeightedBlendedOIT(Scheme):
             [Pass("transparent", "geometry", "fragment"), Pass("composite", "fullscreen", "pixel")]
         plan = OpPlan(passes, (["depth_buffer", "framebuffer"] if prepass else []) + ["accumulation", "revealage"])
         if prepass:
-            base, blended, culled = _opaque_prepass(trace, g, plan, 0, 4, rounder("rgba8"))
+            base, blended, culled = depth_tested_pass(trace, g, plan, 0, 4, rounder("rgba8"))
             t_idx = np.flatnonzero(~trace.opaque)
             plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
         else:
