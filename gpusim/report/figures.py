@@ -253,25 +253,39 @@ SWEEP_PANELS = (("rmse", "RMSE against the exact reference (RGB in [0, 1])", "sy
                 ("wall_us_per_fragment", "simulator wall time per fragment (µs, this machine)", "log"))
 
 
+def _stand_ins(points: pd.DataFrame, level: str) -> tuple[np.ndarray, str]:
+    """(which rows of ``points`` ran at another level than ``level``, a title note saying they are hollow)."""
+    other = (points["fidelity"] != level).to_numpy()
+    levels = ", ".join(dict.fromkeys(points.loc[other, "fidelity"]))
+    return other, (f"; hollow marks: {levels}, where {level} did not finish" if other.any() else "")
+
+
 def sweep(points: pd.DataFrame, x: str, xlabel: str, level: str, title: str, path: Path) -> Path:
     """Image error, simulated cycles per fragment and the simulator's wall time per fragment against a swept
     scene key ``x``, one line per configuration (``points``: one row per configuration and value, with
-    :func:`gpusim.report.tables.per_fragment`'s columns). A numeric ``x`` spanning a decade or more is drawn
-    on a log axis; any other is drawn in the order of its values."""
+    :func:`gpusim.report.tables.per_fragment`'s columns and ``fidelity``; a run at another level than
+    ``level`` is a hollow mark). A numeric ``x`` spanning a decade or more is drawn on a log axis; any other
+    is drawn in the order of its values."""
     values = list(dict.fromkeys(points[x]))
     numeric = all(isinstance(v, (int, float, np.integer, np.floating)) for v in values)
     position = (lambda v: v) if numeric else {v: i for i, v in enumerate(values)}.get
     configs = list(dict.fromkeys(points["config"]))
     colours = _colours(configs)
     markers = "osD^v<>pP*Xh"
+    stand_in, note = _stand_ins(points, level)
     fig = Figure(figsize=(13, 4.8))
     for ax, (column, label, scale) in zip(fig.subplots(1, 3), SWEEP_PANELS):
         for i, config in enumerate(configs):
-            rows = points[points["config"] == config]
+            mine = (points["config"] == config).to_numpy()
+            rows = points[mine]
             xs = np.array([position(v) for v in rows[x]], dtype=float)
+            ys = rows[column].to_numpy(dtype=float)
             order = np.argsort(xs, kind="stable")
-            ax.plot(xs[order], rows[column].to_numpy(dtype=float)[order], marker=markers[i % len(markers)],
-                    markersize=4, linewidth=1.0, color=colours[config], label=config)
+            ax.plot(xs[order], ys[order], marker=markers[i % len(markers)], markersize=4, linewidth=1.0,
+                    color=colours[config], label=config)
+            hollow = stand_in[mine]
+            ax.scatter(xs[hollow], ys[hollow], s=30, marker=markers[i % len(markers)], facecolors="white",
+                       edgecolors=colours[config], linewidths=1.2, zorder=4)
         if scale == "symlog":
             ax.set_yscale("symlog", linthresh=1e-3)
             ax.set_ylim(bottom=0)
@@ -286,7 +300,7 @@ def sweep(points: pd.DataFrame, x: str, xlabel: str, level: str, title: str, pat
         ax.set_xlabel(xlabel)
         ax.set_ylabel(label, fontsize=8)
         ax.grid(True, which="both", alpha=0.25)
-    fig.suptitle(f"{title} (cycles: {level} level)", fontsize=10)
+    fig.suptitle(f"{title} (cycles: {level} level{note})", fontsize=10)
     _legend_below(fig, 7)
     return save(fig, path)
 
@@ -300,18 +314,23 @@ def error_vs_cycles_all(points: pd.DataFrame, level: str, title: str, path: Path
     colours = _colours(configs)
     markers = "osD^v<>pP*Xh"
     unit = "thesis model" if level == "thesis" else f"{level} level, shader clock"
+    stand_in, note = _stand_ins(points, level)
     for ax, column, xlabel in zip(fig.subplots(1, 2), ("cycles", "cycles_per_fragment"),
                                   (f"simulated cycles ({unit})", f"simulated cycles per fragment ({unit})")):
         for i, config in enumerate(configs):
-            rows = points[points["config"] == config]
+            mine = (points["config"] == config).to_numpy()
+            rows = points[mine]
             ax.scatter(rows[column], rows["rmse"], s=22, color=colours[config], marker=markers[i % len(markers)],
                        edgecolors="black", linewidths=0.3, label=config, zorder=3)
+            hollow = stand_in[mine]
+            ax.scatter(rows[column][hollow], rows["rmse"][hollow], s=22, marker=markers[i % len(markers)],
+                       facecolors="white", edgecolors=colours[config], linewidths=1.0, zorder=4)
         ax.set_xscale("log")
         ax.set_yscale("symlog", linthresh=1e-3)
         ax.set_ylim(bottom=0)
         ax.set_xlabel(xlabel)
         ax.set_ylabel("RMSE against the exact reference (RGB in [0, 1])")
         ax.grid(True, which="both", alpha=0.25)
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(title + note, fontsize=10)
     _legend_below(fig, 7)
     return save(fig, path)
