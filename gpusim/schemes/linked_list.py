@@ -37,6 +37,7 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.common.alu import COMPOSITE, UNPACK_RGBA8, compare_exchange, sort_compares
+from gpusim.schemes.common.arrays import lex_order
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.sorting import sort_runs
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, POINTER_BYTES, ColourFormat
@@ -88,12 +89,13 @@ class LinkedList(Scheme):
         nxt = np.full(len(alloc_idx), NIL, np.int64)
         if len(alloc_idx):
             by_pix = g.by_arrival[allocated[g.by_arrival]]     # allocated nodes by pixel, in order
-            same = np.r_[False, pix[by_pix][1:] == pix[by_pix][:-1]]
+            pix_sorted = pix[by_pix]
+            same = np.r_[False, pix_sorted[1:] == pix_sorted[:-1]]
             nxt[by_pix[same]] = by_pix[np.flatnonzero(same) - 1]
-            last = np.r_[pix[by_pix][1:] != pix[by_pix][:-1], True]
-            head[pix[by_pix[last]]] = by_pix[last]
+            last = np.r_[~same[1:], True]
+            head[pix_sorted[last]] = by_pix[last]
         w_pix, w_step, w_node = walk_lists(head, nxt)
-        visit = np.lexsort((w_step, w_pix))
+        visit = lex_order(w_pix, w_step)
         w_pix, w_step, w_node = w_pix[visit], w_step[visit], w_node[visit]
         walked = np.bincount(w_pix, minlength=P)
         limit = self.resolve_max or np.iinfo(np.int64).max

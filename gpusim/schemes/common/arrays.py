@@ -41,27 +41,17 @@ def lex_order(*keys: np.ndarray) -> np.ndarray:
     least significant word first, each pass stable by the index it carries.
     """
     n = len(keys[0])
-    ib = max(1, (n - 1).bit_length())
+    ib = _index_bits(n)
     room = 64 - ib
     words: list[tuple[np.ndarray, int]] = []     # (uint64 word, bits used), least significant first
     for key in reversed(keys):
-        key = np.asarray(key)
         if len(key) != n:
             raise ValueError("lex_order: keys differ in length")
         if n == 0:
             continue
-        if key.dtype.kind == "b":
-            key = key.view(np.uint8)
-        if key.dtype.kind not in "iu":
-            raise TypeError(f"lex_order: keys must be integers or bools, not {key.dtype}")
-        lo, hi = int(key.min()), int(key.max())
-        width = (hi - lo).bit_length()
+        field, _, width = _from_zero(key)
         if width == 0:
             continue                              # one value: orders nothing
-        if key.dtype.kind == "u":
-            field = key.astype(np.uint64) - np.uint64(lo)
-        else:                                     # wraps modulo 2**64 to the exact key - lo
-            field = (key.astype(np.int64) - np.int64(lo)).view(np.uint64)
         shift = 0
         while shift < width:
             bits = min(room, width - shift)
@@ -75,17 +65,57 @@ def lex_order(*keys: np.ndarray) -> np.ndarray:
                 words.append((piece, bits))
             shift += bits
     perm = None
-    index = np.arange(n, dtype=np.uint64)
-    mask = np.uint64((1 << ib) - 1)
     for word, _ in words:
-        packed = word if perm is None else word[perm]
-        packed = packed << np.uint64(ib)
-        packed |= index
-        packed.sort()
-        packed &= mask
-        step = packed.astype(np.intp)
-        perm = step if perm is None else perm[step]
+        perm, _ = _sort_word(word, ib, perm)
     return np.arange(n, dtype=np.intp) if perm is None else perm
+
+
+def sorted_order(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``lex_order(values)`` and ``values`` in that order, read off the sorted word (no gather)
+    when one word holds them beside the index."""
+    values = np.asarray(values)
+    n = len(values)
+    if n and values.dtype.kind in "iu":
+        ib = _index_bits(n)
+        field, lo, width = _from_zero(values)
+        if 0 < width <= 64 - ib:
+            perm, packed = _sort_word(field, ib)
+            packed >>= np.uint64(ib)
+            if values.dtype.kind == "u":
+                return perm, (packed + np.uint64(lo)).astype(values.dtype)
+            return perm, (packed.view(np.int64) + np.int64(lo)).astype(values.dtype)
+    perm = lex_order(values)
+    return perm, values[perm]
+
+
+def _index_bits(n: int) -> int:
+    return max(1, (n - 1).bit_length())
+
+
+def _from_zero(key) -> tuple[np.ndarray, int, int]:
+    """An integer or bool key shifted to start at 0, as uint64: (field, lowest value, bit width)."""
+    key = np.asarray(key)
+    if key.dtype.kind == "b":
+        key = key.view(np.uint8)
+    if key.dtype.kind not in "iu":
+        raise TypeError(f"keys must be integers or bools, not {key.dtype}")
+    lo, hi = int(key.min()), int(key.max())
+    if key.dtype.kind == "u":
+        field = key.astype(np.uint64) - np.uint64(lo)
+    else:                                         # wraps modulo 2**64 to the exact key - lo
+        field = (key.astype(np.int64) - np.int64(lo)).view(np.uint64)
+    return field, lo, (hi - lo).bit_length()
+
+
+def _sort_word(word: np.ndarray, ib: int, perm: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One stable pass: order by ``word`` (taken in ``perm`` order) with the position in the low ``ib`` bits.
+    Returns the composed permutation and the sorted packed word."""
+    packed = word if perm is None else word[perm]
+    packed = packed << np.uint64(ib)
+    packed |= np.arange(len(packed), dtype=np.uint64)
+    packed.sort()
+    step = (packed & np.uint64((1 << ib) - 1)).astype(np.intp)
+    return (step if perm is None else perm[step]), packed
 
 
 def rank_in_runs(pix_sorted: np.ndarray) -> np.ndarray:
@@ -97,9 +127,7 @@ def rank_in_runs(pix_sorted: np.ndarray) -> np.ndarray:
 def unique_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``np.unique(values, return_index=True, return_inverse=True)`` for integers, sorted by
     :func:`lex_order`: the distinct values ascending, the first index of each, and each value's id."""
-    values = np.asarray(values)
-    order = lex_order(values)
-    ordered = values[order]
+    order, ordered = sorted_order(values)
     new = np.empty(len(values), bool)
     new[:1] = True
     np.not_equal(ordered[1:], ordered[:-1], out=new[1:])
@@ -118,23 +146,15 @@ def sort_within_runs(pix_sorted: np.ndarray, key: np.ndarray) -> np.ndarray:
     n = len(pix_sorted)
     if n == 0:
         return np.zeros(0, np.intp)
-    key = np.asarray(key)
-    if key.dtype.kind not in "iu":
-        raise TypeError(f"sort_within_runs: keys must be integers, not {key.dtype}")
+    field, _, key_bits = _from_zero(key)
     start = run_starts(pix_sorted)
     length = np.diff(np.r_[start, n])
-    lo, hi = int(key.min()), int(key.max())
     rank_bits = int(length.max() - 1).bit_length()
-    key_bits = (hi - lo).bit_length()
     run_bits = (len(start) - 1).bit_length()
     run = np.repeat(np.arange(len(start), dtype=np.uint64), length)
     if run_bits + key_bits + rank_bits > 64:
         return lex_order(run, key)
     rank = np.arange(n, dtype=np.uint64) - np.repeat(start.astype(np.uint64), length)
-    if key.dtype.kind == "u":
-        field = key.astype(np.uint64) - np.uint64(lo)
-    else:
-        field = (key.astype(np.int64) - np.int64(lo)).view(np.uint64)
     packed = (run << np.uint64(key_bits + rank_bits)) | (field << np.uint64(rank_bits)) | rank
     packed.sort()
     rank_mask = np.uint64((1 << rank_bits) - 1)

@@ -60,14 +60,14 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
     """Run phase 1 (adding its z-buffer and frame-buffer operations to ``plan``) and phase 2's test."""
     opaque = trace.opaque
     pix, key = g.pix, g.key
-    order = g.by_arrival
+    order, pix_sorted = g.by_arrival, g.pix_by_arrival
     okey = np.where(opaque, key.astype(np.uint64), np.uint64(0xFFFFFFFF))   # above every depth key
     # nearest opaque depth submitted *before* each fragment at its pixel
     before = np.empty(g.n, np.uint64)
-    before[order] = np.minimum(segment_running_min_before(pix[order], okey[order]), _FAR)
+    before[order] = np.minimum(segment_running_min_before(pix_sorted, okey[order]), _FAR)
     stored = ~opaque & (key < before)
     # nearest opaque depth of the whole frame: the running minimum through each pixel's last fragment
-    last = order[np.r_[run_starts(pix[order])[1:], g.n] - 1] if g.n else order
+    last = order[np.r_[run_starts(pix_sorted)[1:], g.n] - 1] if g.n else order
     final = np.full(trace.pixel_count, _FAR)
     final[pix[last]] = np.minimum(np.minimum(before[last], okey[last]), _FAR)
     visible = stored & (key < final[pix])
@@ -79,7 +79,7 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
         last = writes[lex_order(pix[writes])]   # writes ascend: ties stay in submission order
         is_last = np.r_[pix[last][1:] != pix[last][:-1], True]
         winners = last[is_last]
-        opaque_rgb[pix[winners]] = colour_round(trace.rgba[winners, :3])
+        opaque_rgb[pix[winners]] = colour_round(np.take(trace.rgba[:, :3], winners, axis=0))
     uses_z = bool(opaque.any())
     if uses_z:   # every fragment tests the z-buffer
         plan.add(pass_index, "depth_test", "z_buffer", g.n, 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES)

@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from gpusim.schemes.common.arrays import lex_order, pixel_key, rank_in_runs
+from gpusim.schemes.common.arrays import lex_order, pixel_key, rank_in_runs, sorted_order
 from gpusim.schemes.common.depthkey import depth_key
 from gpusim.schemes.common.storage import effective_alpha
 from gpusim.trace import FragmentTrace
@@ -51,12 +51,23 @@ class PixelGroups:
     @cached_property
     def by_arrival(self) -> np.ndarray:
         """Fragment indices grouped by pixel (ascending), submission order inside a pixel."""
-        return lex_order(self.pix)
+        return self._arrival[0]
+
+    @cached_property
+    def pix_by_arrival(self) -> np.ndarray:
+        """``pix[by_arrival]``: the pixel ids ascending."""
+        return self._arrival[1]
+
+    @cached_property
+    def _arrival(self) -> tuple[np.ndarray, np.ndarray]:
+        return sorted_order(self.pix)
 
     @cached_property
     def arrival(self) -> np.ndarray:
         """0-based arrival rank of each fragment at its pixel (the j-1 of 'j-th fragment')."""
-        return self._rank_in_runs(self.by_arrival)
+        rank = np.empty(self.n, np.int64)
+        rank[self.by_arrival] = rank_in_runs(self.pix_by_arrival)
+        return rank
 
     @cached_property
     def by_depth(self) -> np.ndarray:
@@ -84,11 +95,6 @@ class PixelGroups:
             last = np.r_[pix_sorted[1:] != pix_sorted[:-1], True]
             lay[pix_sorted[last]] = self._distinct_rank_by_depth[last] + 1
         return lay
-
-    def _rank_in_runs(self, order: np.ndarray) -> np.ndarray:
-        rank = np.empty(self.n, np.int64)
-        rank[order] = rank_in_runs(self.pix[order])
-        return rank
 
 
 def distinct_ids(pix_sorted: np.ndarray, key_sorted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

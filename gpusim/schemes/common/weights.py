@@ -35,7 +35,10 @@ Ties = Literal["arrival", "eq4"]
 def unorm(values: np.ndarray, bits: int) -> np.ndarray:
     """Values in [0, 1] as ``bits``-bit unsigned normalised integers (round to nearest), int64."""
     top = (1 << bits) - 1
-    return np.rint(np.clip(np.asarray(values, np.float64), 0.0, 1.0) * top).astype(np.int64)
+    v = np.array(values, np.float64)          # a copy: the steps below work in place
+    np.clip(v, 0.0, 1.0, out=v)
+    v *= top
+    return np.rint(v, out=v).astype(np.int64)
 
 
 def unorm_rounder(bits: int):
@@ -85,7 +88,7 @@ def composite_weighted(pix: np.ndarray, key: np.ndarray, weighted: np.ndarray, a
         else:
             tie_w[:m] = trans[:m]
             w = trans[:m]
-        colour[:m] += w[:, None] * weighted[idx]
+        colour[:m] += w[:, None] * np.take(weighted, idx, axis=0)
         trans[:m] *= np.float32(1.0) - alpha[idx]
     image[covered] = colour + trans[:, None] * image[covered]
     return image
@@ -122,10 +125,10 @@ def weighted_image(trace, g, visible: np.ndarray, stored: np.ndarray, colours: S
 
     ``colours`` belong to the fragments ``stored`` (trace indices, a superset of the visible ones).
     """
-    n = len(trace)
-    weighted = np.zeros((n, 3), np.float32)
-    alpha = np.zeros(n, np.float32)
-    weighted[stored], alpha[stored] = colours.weighted, colours.alpha
+    at = np.empty(len(trace), np.int64)            # each stored fragment's row in ``colours``
+    at[stored] = np.arange(len(stored))
     order = g.by_depth[visible[g.by_depth]]
-    image = composite_weighted(g.pix[order], g.key[order], weighted[order], alpha[order], base, ties)
+    rows = at[order]
+    image = composite_weighted(g.pix[order], g.key[order], np.take(colours.weighted, rows, axis=0),
+                               colours.alpha[rows], base, ties)
     return image.reshape(trace.height, trace.width, 3), order
