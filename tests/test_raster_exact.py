@@ -37,8 +37,8 @@ def _batch(seed: int, count: int, width: int, height: int) -> TriangleBatch:
     return TriangleBatch(clip, rgba, rng.random(count) < 0.3)
 
 
-def _reference(batch: TriangleBatch, trace, width: int, height: int):
-    """(z, rgba) of each fragment of ``trace`` by the plain formula, float32."""
+def _reference(batch: TriangleBatch, trace, width: int, height: int, dtype=np.float32):
+    """(z, rgba) of each fragment of ``trace`` by the plain formula, float32 (or ``dtype``)."""
     clip = batch.clip
     inv_w = 1.0 / clip[..., 3]
     fx = np.rint((clip[..., 0] * inv_w + 1.0) * (width / 2.0 * 256)).astype(np.int64)
@@ -60,8 +60,8 @@ def _reference(batch: TriangleBatch, trace, width: int, height: int):
     dx = (trace.x + 0.5) - px[t, 0]
     dy = (trace.y + 0.5) - py[t, 0]
     vals = attrs[t, 0] + dadx[t] * dx[:, None] + dady[t] * dy[:, None]
-    return (np.clip(vals[:, 0], 0, 1).astype(np.float32),
-            np.clip(vals[:, 2:] / vals[:, 1:2], 0, 1).astype(np.float32))
+    return (np.clip(vals[:, 0], 0, 1).astype(dtype),
+            np.clip(vals[:, 2:] / vals[:, 1:2], 0, 1).astype(dtype))
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:

@@ -27,15 +27,21 @@ Rules (all exact, integer arithmetic where coverage is decided):
 
 The work is split into row spans (per triangle and pixel row, the exact first
 and last covered pixel from the three edge equations) and then fragments are
-emitted span by span in bounded chunks into arrays allocated once.
+emitted span by span into arrays allocated once. Two paths do it with the same
+results bit for bit: compiled kernels (numba, :mod:`gpusim.raster.kernel`, one
+triangle at a time) when numba imports, else numpy (all triangles at once, then
+fragments in bounded chunks). Both evaluate the formulas of
+:mod:`gpusim.raster.kernel`, written once.
 
 Precision: set-up and interpolation are float64. Each fragment's value is
 ``a0 + dadx*dx + dady*dy`` of its triangle's plane (window z; 1/w; rgba/w,
-divided by the interpolated 1/w), clamped and then rounded to float32. The
-emission loop evaluates exactly these float64 operations, but per attribute over
+divided by the interpolated 1/w); depth is clamped to [0, 1] and rounded to
+float32, colour rounded to float32 and then clamped (a tiny negative stays -0.0). The
+numpy path evaluates exactly these float64 operations, but per attribute over
 chunks of about _FRAGMENTS_PER_CHUNK fragments that stay in cache, with each
-span's plane values gathered once and repeated over its fragments
-(tests/test_raster_exact.py holds it to the plain formula bit for bit). Mesa's
+span's plane values gathered once and repeated over its fragments; the kernels
+evaluate them per fragment, vectorised over a triangle's fragments
+(tests/test_raster_exact.py holds both to the plain formula bit for bit). Mesa's
 llvmpipe keeps its plane coefficients and interpolates in float32; the two agree
 on coverage (tests/test_mesa_agreement.py), not on the last bits of depth and
 colour, and evaluating gpusim's planes in float32 instead would change about a
@@ -49,14 +55,15 @@ from typing import Literal
 import numpy as np
 
 from gpusim.raster.batch import TriangleBatch
+from gpusim.raster import kernel
 from gpusim.raster.clip import clip_triangles
+from gpusim.raster.kernel import (HALF, ONE, SUBPIXEL_BITS, doubled_area, edge, gradients, pixel_range,
+                                  plane, snap, window_depth)
 from gpusim.trace import DTYPES, MAX_SCREEN_SIDE, FragmentTrace
 
-SUBPIXEL_BITS = 8
-_ONE = 1 << SUBPIXEL_BITS        # one pixel in fixed point
-_HALF = _ONE // 2                # pixel-centre offset
 _ROWS_PER_CHUNK = 1 << 16
 _FRAGMENTS_PER_CHUNK = 1 << 14  # small enough for a chunk's float64 work to stay in cache
+_FRAGMENTS_PER_CALL = 1 << 20   # compiled path: fragments per emission call (progress bar steps)
 _GATHER_BELOW = 0.75             # set-up gathers the kept triangles when fewer are kept
 
 
@@ -70,19 +77,19 @@ class _Setup:
     def __init__(self, batch: TriangleBatch, width: int, height: int, cull: str):
         clip = np.ascontiguousarray(batch.clip.transpose(2, 1, 0))             # (4, 3, T)
         inv_w = 1.0 / clip[3]
-        fx = np.rint((clip[0] * inv_w + 1.0) * (width / 2.0 * _ONE)).astype(np.int64)
-        fy = np.rint((clip[1] * inv_w + 1.0) * (height / 2.0 * _ONE)).astype(np.int64)
-        area2 = (fx[1] - fx[0]) * (fy[2] - fy[0]) - (fx[2] - fx[0]) * (fy[1] - fy[0])
+        fx = snap(clip[0], inv_w, width / 2.0 * ONE).astype(np.int64)
+        fy = snap(clip[1], inv_w, height / 2.0 * ONE).astype(np.int64)
+        area2 = doubled_area(fx, fy)
         keep = area2 != 0
         if cull == "back":
             keep &= area2 > 0
         elif cull == "front":
             keep &= area2 < 0
-        # pixel bounding box of the covered samples, clamped to the screen (>> is floor division)
-        bx0 = np.maximum((fx.min(axis=0) - _HALF + _ONE - 1) >> SUBPIXEL_BITS, 0)
-        bx1 = np.minimum((fx.max(axis=0) - _HALF) >> SUBPIXEL_BITS, width - 1)
-        by0 = np.maximum((fy.min(axis=0) - _HALF + _ONE - 1) >> SUBPIXEL_BITS, 0)
-        by1 = np.minimum((fy.max(axis=0) - _HALF) >> SUBPIXEL_BITS, height - 1)
+        # pixel bounding box of the covered samples, clamped to the screen
+        bx0, bx1 = pixel_range(fx.min(axis=0), fx.max(axis=0))
+        by0, by1 = pixel_range(fy.min(axis=0), fy.max(axis=0))
+        bx0, bx1 = np.maximum(bx0, 0), np.minimum(bx1, width - 1)
+        by0, by1 = np.maximum(by0, 0), np.minimum(by1, height - 1)
         keep &= (bx0 <= bx1) & (by0 <= by1)
         sel = np.flatnonzero(keep)
         if len(sel) < _GATHER_BELOW * len(keep):       # set up the kept triangles only
@@ -98,9 +105,7 @@ class _Setup:
         self.x0, self.x1, self.y0, self.y1 = bx0, bx1, by0, by1
         # z, 1/w and rgba/w at each vertex, (6, 3, T)
         attrs = np.empty((6, 3, self.count))
-        np.multiply(z, inv_w, out=attrs[0])
-        attrs[0] += 1.0
-        attrs[0] *= 0.5
+        attrs[0] = window_depth(z, inv_w)
         attrs[1] = inv_w
         np.multiply(rgba.transpose(2, 1, 0), inv_w, out=attrs[2:])
         # make every kept triangle counter-clockwise by swapping vertices 1 and 2
@@ -111,32 +116,22 @@ class _Setup:
                 np.copyto(arr[..., 1, :], arr[..., 2, :], where=flip)
                 np.copyto(arr[..., 2, :], v1, where=flip)
         area2 = np.abs(area2)
-        # edge k runs from vertex (k+1)%3 to (k+2)%3 and is opposite vertex k; a sample at
-        # fixed-point (X, Y) is inside edge k when ea*(X - ex) + eb*(Y - ey) + ebias >= 0
+        # edge k runs from vertex (k+1)%3 to (k+2)%3 and is opposite vertex k; per row Y the
+        # value at pixel x is kk + ea*ONE*x, kk = ec + eb*Y (exact in int64)
         i, j = [1, 2, 0], [2, 0, 1]
-        ea = fy[i] - fy[j]                                    # A_k = -(Yj - Yi)
-        eb = fx[j] - fx[i]                                    # B_k = Xj - Xi
-        ebias = np.where((ea > 0) | ((ea == 0) & (eb > 0)), 0, -1)   # top-left rule
-        # per row Y: value at pixel x is kk + ea*_ONE*x, kk = ec + eb*Y (exact in int64)
-        self.ea, self.eb = ea, eb
-        self.ec = ea * (_HALF - fx[i]) - eb * fy[i] + ebias
+        self.ea, self.eb, self.ec = edge(fx[i], fy[i], fx[j], fy[j])
         self.planes = self._attribute_planes(fx, fy, area2, attrs)
 
     @staticmethod
     def _attribute_planes(fx, fy, area2, attrs) -> tuple[np.ndarray, ...]:
         """Planes a0 + dadx*(x-x0) + dady*(y-y0) (pixel units) for z, 1/w and rgba/w: one (18, T)
         table of dadx, a0 and dady (6 rows each), and each triangle's vertex 0 (x0, y0), each (T,)."""
-        px, py = fx / _ONE, fy / _ONE
+        px, py = fx / ONE, fy / ONE
         d1, d2 = attrs[:, 1] - attrs[:, 0], attrs[:, 2] - attrs[:, 0]
         x10, x20 = px[1] - px[0], px[2] - px[0]
         y10, y20 = py[1] - py[0], py[2] - py[0]
-        area = area2 / (_ONE * _ONE)
-        dadx = d1 * y20
-        dadx -= d2 * y10
-        dadx /= area
-        dady = d2 * x10
-        dady -= d1 * x20
-        dady /= area
+        area = area2 / (ONE * ONE)
+        dadx, dady = gradients(d1, d2, x10, x20, y10, y20, area)
         return np.concatenate([dadx, attrs[:, 0], dady]), px[0], py[0]
 
 
@@ -146,7 +141,7 @@ def _row_spans(setup: _Setup):
     cum = np.cumsum(nrows)
     y_off = setup.y0 - (cum - nrows)          # py = y_off + global row index
     ea = setup.ea
-    div = np.where(ea == 0, 1, np.abs(ea) * _ONE)
+    div = np.where(ea == 0, 1, np.abs(ea) * ONE)
     pos, neg = ea > 0, ea < 0
     out_tri, out_y, out_lo, out_len = [], [], [], []
     start = 0
@@ -157,13 +152,13 @@ def _row_spans(setup: _Setup):
         counts = nrows[start:stop]
         each = lambda per_tri: np.repeat(per_tri[..., start:stop], counts, axis=-1)  # noqa: E731
         py = np.arange(base, cum[stop - 1]) + each(y_off)
-        ys = py * _ONE + _HALF
+        ys = py * ONE + HALF
         lo, hi = each(setup.x0), each(setup.x1)
-        # edge k at pixel x of row ys: kk + ea*_ONE*x >= 0, kk = ec + eb*ys
+        # edge k at pixel x of row ys: kk + ea*ONE*x >= 0, kk = ec + eb*ys
         kk = each(setup.eb)
         kk *= ys
         kk += each(setup.ec)
-        kk //= each(div)                                  # floor(kk / (|ea| * _ONE))
+        kk //= each(div)                                  # floor(kk / (|ea| * ONE))
         left, right = each(pos), each(neg)
         empty = np.zeros(len(py), dtype=bool)
         for k in range(3):
@@ -192,9 +187,49 @@ def rasterize(batch: TriangleBatch, width: int, height: int,
         raise ValueError(f"screen size {width}x{height} outside 1..{MAX_SCREEN_SIDE}")
     if cull not in ("none", "back", "front"):
         raise ValueError(f"cull must be none, back or front, not {cull!r}")
-    setup = _Setup(clip_triangles(batch), width, height, cull)
+    from tqdm import tqdm
+
+    bar = tqdm(unit="frag", unit_scale=True, disable=(None if progress is None else not progress),
+               desc="rasterize", leave=False)
+    compiled = kernel.compiled()
+    clipped = clip_triangles(batch)
+    with bar:
+        if compiled is not None:
+            out = _emit_compiled(compiled, clipped, width, height, cull, bar)
+        else:
+            out = _emit_numpy(_Setup(clipped, width, height, cull), bar)
+    return FragmentTrace(**out, width=width, height=height, meta=dict(meta or {}))
+
+
+def _emit_compiled(compiled, batch: TriangleBatch, width: int, height: int, cull: str, bar) -> dict:
+    """Set-up, spans and fragments by the compiled kernels, straight into the trace's arrays,
+    over ranges of triangles of about _FRAGMENTS_PER_CALL fragments."""
+    count = len(batch)
+    ints = np.empty((count, kernel.INTS), np.int64)
+    floats = np.empty((count, kernel.FLOATS))
+    offsets = np.zeros(count + 1, np.int64)
+    compiled.setup(batch.clip, batch.rgba, width, height, kernel.CULL[cull], ints, floats, offsets[1:])
+    np.cumsum(offsets, out=offsets)
+    total = int(offsets[-1])
+    bar.reset(total)
+    out = {name: np.empty((total, 4) if name == "rgba" else total, dtype) for name, dtype in DTYPES.items()}
+    first = 0
+    while first < count:
+        last = int(np.searchsorted(offsets, offsets[first] + _FRAGMENTS_PER_CALL, side="right")) - 1
+        last = min(max(last, first + 1), count)
+        compiled.emit(first, last, height, ints, floats, offsets, batch.prim, batch.opaque,
+                      out["x"], out["y"], out["z"], out["rgba"].reshape(-1), out["prim"], out["opaque"])
+        bar.update(int(offsets[last] - offsets[first]))
+        first = last
+    return out
+
+
+def _emit_numpy(setup: _Setup, bar) -> dict:
+    """Fragments by numpy: span constants repeated over chunks of about _FRAGMENTS_PER_CHUNK
+    fragments."""
     tri, py, lo, length = _row_spans(setup)
     total = int(length.sum())
+    bar.reset(total)
     # per-span constants spread over the span's fragments directly into the outputs
     out = {"y": np.repeat(py.astype(np.uint16), length),
            "prim": np.repeat(setup.prim[tri], length),
@@ -210,10 +245,6 @@ def rasterize(batch: TriangleBatch, width: int, height: int,
         bounds.append(max(nxt, bounds[-1] + 1))
     steps = np.arange(max(_FRAGMENTS_PER_CHUNK, int(length.max(initial=0))))   # j, then j + 0.5
     half_steps = steps + 0.5
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, unit="frag", unit_scale=True, disable=(None if progress is None else not progress),
-               desc="rasterize", leave=False)
     pos = 0
     for a, b in zip(bounds[:-1], bounds[1:]):
         # per span (row): the 6 planes' dadx, a0 and dady*dy, and dx of the span's pixel 0
@@ -231,19 +262,15 @@ def rasterize(batch: TriangleBatch, width: int, height: int,
         rgba = out["rgba"][sl]
         for k in (1, 0, 2, 3, 4, 5):
             # the same float64 operations, in the same order, as a0 + dadx*dx + dady*dy per fragment
-            frag = np.repeat(per_row[k:18:6], lens, axis=1)
-            val = frag[0]
-            val *= dx
-            val += frag[1]
-            val += frag[2]
+            dadx, a0, dady_dy = np.repeat(per_row[k:18:6], lens, axis=1)
+            val = plane(dadx, dx, a0, dady_dy)
             if k == 1:
                 inv_w = val
             elif k == 0:
                 np.clip(val, 0.0, 1.0, out=out["z"][sl], casting="same_kind")
             else:
                 np.divide(val, inv_w, out=rgba[:, k - 2], casting="same_kind")
-        np.clip(rgba, 0.0, 1.0, out=rgba)    # the same as clipping before rounding to float32
+        np.clip(rgba, 0.0, 1.0, out=rgba)    # after rounding to float32: a tiny negative stays -0.0
         pos += n
         bar.update(n)
-    bar.close()
-    return FragmentTrace(**out, width=width, height=height, meta=dict(meta or {}))
+    return out
