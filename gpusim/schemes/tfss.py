@@ -116,7 +116,7 @@ class TFSS(Scheme):
         ez = early_z(trace, g, plan, 1, fb_bytes, unorm_rounder(bits))
 
         cand = np.flatnonzero(ez.stored)
-        col = stored_colours(trace.rgba[cand], bits, 8 * self.fragment_bytes, lze)
+        col = stored_colours(np.take(trace.rgba, cand, axis=0), bits, 8 * self.fragment_bytes, lze)
         frag_bits = np.zeros(n, np.int64)
         frag_bits[cand] = col.bits
         exact_fit = lze == "off" and self.section_bytes in (0, L * self.fragment_bytes)

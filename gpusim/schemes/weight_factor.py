@@ -100,7 +100,7 @@ class WeightFactor(Scheme):
                  dep=True)
         plan.compute(2, rpix, weight_factor_work(np.bincount(pix[ez.visible], minlength=P)[rpix]))
         blended = resolve_writes(plan, 2, pix, ez.visible, P, fb_bytes)
-        col = stored_colours(trace.rgba[kept], bits, 8 * FB, "off")
+        col = stored_colours(np.take(trace.rgba, kept, axis=0), bits, 8 * FB, "off")
         image, order = weighted_image(trace, g, ez.visible, kept, col, ez.opaque_rgb, self.ties)
 
         sections = P + n_a

@@ -27,7 +27,6 @@ import numpy as np
 
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OpPlan
-from gpusim.schemes.common.arrays import lex_order
 from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.common.storage import DEPTH_BYTES
 from gpusim.schemes.result import Stat, Structure
@@ -58,27 +57,30 @@ class EarlyZ:
 def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_bytes: int,
             colour_round) -> EarlyZ:
     """Run phase 1 (adding its z-buffer and frame-buffer operations to ``plan``) and phase 2's test."""
-    opaque = trace.opaque
-    pix, key = g.pix, g.key
+    opaque, pix = trace.opaque, g.pix
+    # in arrival order (grouped by pixel): what each pixel sees fragment after fragment
     order, pix_sorted = g.by_arrival, g.pix_by_arrival
-    okey = np.where(opaque, key.astype(np.uint64), np.uint64(0xFFFFFFFF))   # above every depth key
+    key, is_opaque = g.key[order], opaque[order]
+    okey = np.where(is_opaque, key.astype(np.uint64), np.uint64(0xFFFFFFFF))   # above every depth key
     # nearest opaque depth submitted *before* each fragment at its pixel
-    before = np.empty(g.n, np.uint64)
-    before[order] = np.minimum(segment_running_min_before(pix_sorted, okey[order]), _FAR)
-    stored = ~opaque & (key < before)
+    before = np.minimum(segment_running_min_before(pix_sorted, okey), _FAR)
+    passes = key < before
+    stored_sorted = ~is_opaque & passes
     # nearest opaque depth of the whole frame: the running minimum through each pixel's last fragment
-    last = order[np.r_[run_starts(pix_sorted)[1:], g.n] - 1] if g.n else order
+    last = np.r_[run_starts(pix_sorted)[1:], g.n] - 1 if g.n else order
     final = np.full(trace.pixel_count, _FAR)
-    final[pix[last]] = np.minimum(np.minimum(before[last], okey[last]), _FAR)
-    visible = stored & (key < final[pix])
+    final[pix_sorted[last]] = np.minimum(np.minimum(before[last], okey[last]), _FAR)
+    visible_sorted = stored_sorted & (key < final[pix_sorted])
+    stored, visible, written = np.empty(g.n, bool), np.empty(g.n, bool), np.empty(g.n, bool)
+    stored[order], visible[order] = stored_sorted, visible_sorted
+    written[order] = is_opaque & passes                       # opaque fragments passing LESS
+    writes = np.flatnonzero(written)
     opaque_rgb = np.empty((trace.pixel_count, 3), np.float32)
     opaque_rgb[:] = colour_round(trace.background.astype(np.float32))
-    writes = np.flatnonzero(opaque & (key < before))            # opaque fragments passing LESS
     if len(writes):
         # the last write at a pixel is its nearest opaque fragment (first submitted among equals)
-        last = writes[lex_order(pix[writes])]   # writes ascend: ties stay in submission order
-        is_last = np.r_[pix[last][1:] != pix[last][:-1], True]
-        winners = last[is_last]
+        at = np.flatnonzero(is_opaque & passes)
+        winners = order[at[np.r_[pix_sorted[at][1:] != pix_sorted[at][:-1], True]]]
         opaque_rgb[pix[winners]] = colour_round(np.take(trace.rgba[:, :3], winners, axis=0))
     uses_z = bool(opaque.any())
     if uses_z:   # every fragment tests the z-buffer
@@ -86,8 +88,8 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
     plan.add(pass_index, "store", "framebuffer", writes, 1,
              lambda i, s: pix[writes[i]] * framebuffer_bytes, framebuffer_bytes, dep=True)
     return EarlyZ(stored, visible, opaque_rgb, final != _FAR, uses_z,
-                  culled_at_arrival=int(np.count_nonzero(~opaque & ~stored)),
-                  occluded_after_store=int(np.count_nonzero(stored & ~visible)))
+                  culled_at_arrival=int(np.count_nonzero(~is_opaque & ~passes)),
+                  occluded_after_store=int(np.count_nonzero(stored_sorted & ~visible_sorted)))
 
 
 PIPELINE = ("z_buffer", "framebuffer")

@@ -25,23 +25,20 @@ LzeMode = Literal["off", "fixed", "variable"]
 
 
 def significant_bits(values: np.ndarray) -> np.ndarray:
-    """Bits needed to write each non-negative integer without leading zeros (0 for 0)."""
-    v = np.asarray(values, np.int64)
-    out = np.zeros(v.shape, np.int64)
-    nz = v > 0
-    out[nz] = np.floor(np.log2(v[nz])).astype(np.int64) + 1
-    return out
+    """Bits needed to write each non-negative integer (below 2**53) without leading zeros (0 for 0)."""
+    v = np.maximum(np.asarray(values, np.int64), 0).astype(np.float64)   # exact below 2**53
+    return np.frexp(v)[1].astype(np.int64)        # v = m * 2**e with m in [0.5, 1): e bits (0 -> 0)
 
 
 def colour_bits(rgb: np.ndarray, bits: int, mode: str) -> np.ndarray:
     """Stored RGB bits per fragment for integer channels ``rgb`` (N, 3) of width ``bits``."""
     if mode == "off":
         return np.full(len(rgb), 3 * bits, np.int64)
-    lengths = significant_bits(rgb)
-    if mode == "fixed":
-        return 3 * lengths.max(axis=1)
+    if mode == "fixed":         # the longest channel: the bits of the largest
+        rgb = np.asarray(rgb)
+        return 3 * significant_bits(np.maximum(np.maximum(rgb[:, 0], rgb[:, 1]), rgb[:, 2]))
     if mode == "variable":
-        return lengths.sum(axis=1)
+        return significant_bits(rgb).sum(axis=1)
     raise ValueError(f"unknown leading-0s elimination mode {mode!r}")
 
 
