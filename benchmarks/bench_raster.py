@@ -1,7 +1,7 @@
 """Rasterizer throughput: fragments per second of wall time for a 512x512 view of a ~70K-triangle mesh.
 
     .venv/bin/python benchmarks/bench_raster.py [--repeat 5] [--scenes bunny default foliage]
-                                                [--sizes 512x512 1920x1080] [--no-llvmpipe]
+                                                [--sizes 512x512 1920x1080] [--no-llvmpipe] [--numpy]
 
 Uses the Stanford bunny (69,451 triangles, glmark2-data) when present, else a
 procedural sphere of about 70K triangles. Target: at least 2 million fragments
@@ -21,11 +21,18 @@ so each case's llvmpipe figure comes from a fresh subprocess, run just before
 gpusim's. Target: gpusim within 5x of llvmpipe's fragments per second. Without
 moderngl or Mesa's EGL the comparison says so in one line and gpusim's figures
 are still printed.
+
+gpusim rasterizes with its compiled kernels (numba) when numba imports, else with
+its numpy path; with the kernels, each case also times the numpy path (same
+trace) for comparison, and --numpy times the numpy path only. Every timing is
+taken after a warm-up call, so numba's compile time (a few seconds, once; then
+loaded from its on-disk cache) is never in the rates: it is printed on its own.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -36,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gpusim.raster import rasterize
+from gpusim.raster import kernel, rasterize
 from gpusim.raster.clip import clip_triangles
 from gpusim.scene import load_scene
 from gpusim.scene.build import scene_triangles
@@ -138,8 +145,10 @@ def compare_with_llvmpipe(scenes: list[str], sizes: list[tuple[int, int]], repea
     """
     print(f"\nside by side with Mesa llvmpipe, LP_NUM_THREADS=1, best of {repeat} runs, M fragments/s "
           f"of wall and of CPU time ({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f})")
+    both = kernel.compiled() is not None
     print(f"{'scene':9s}{'size':>11s}{'triangles':>11s}{'fragments':>12s}  {'gpusim wall/cpu':>16s}"
-          f"  {'llvmpipe wall/cpu':>18s}  {'ratio wall/cpu':>15s}  within {LLVMPIPE_FACTOR:g}x")
+          + (f"  {'numpy path':>10s}" if both else "")
+          + f"  {'llvmpipe wall/cpu':>18s}  {'ratio wall/cpu':>15s}  within {LLVMPIPE_FACTOR:g}x")
     all_within, missing = True, None
     for name in scenes:
         for width, height in sizes:
@@ -156,6 +165,10 @@ def compare_with_llvmpipe(scenes: list[str], sizes: list[tuple[int, int]], repea
             rate = np.array([fragments / wall, fragments / cpu])
             line = (f"{name:9s}{f'{width}x{height}':>11s}{len(batch):>11,}{fragments:>12,}"
                     f"  {rate[0] / 1e6:8.2f}{rate[1] / 1e6:8.2f}")
+            if both:   # the numpy path on the same triangles, CPU time
+                with kernel.numpy_path():
+                    _, cpu_numpy = best_seconds(lambda: rasterize(batch, width, height), repeat)  # noqa: B023
+                line += f"  {fragments / cpu_numpy / 1e6:10.2f}"
             if ref is not None:
                 ref_rate = ref["fragments"] / np.array([ref["wall"], ref["cpu"]])
                 ratio = ref_rate / rate
@@ -178,16 +191,35 @@ def main() -> int:
     ap.add_argument("--scenes", nargs="+", default=["bunny", "default", "foliage"])
     ap.add_argument("--sizes", nargs="+", type=parse_size, default=[(512, 512), (1920, 1080)])
     ap.add_argument("--no-llvmpipe", action="store_true", help="gpusim's figures only")
+    ap.add_argument("--numpy", action="store_true", help="time the rasterizer's numpy path (no compiled kernels)")
     ap.add_argument("--llvmpipe-worker", nargs=4, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.llvmpipe_worker:
         path, width, height, repeat = args.llvmpipe_worker
         llvmpipe_worker(path, int(width), int(height), int(repeat))
         return 0
+    with kernel.numpy_path() if args.numpy else contextlib.nullcontext():
+        return run(args)
+
+
+def run(args) -> int:
     name, scene, base = workload()
     batch = scene_triangles(scene, base)
     w, h = scene.screen.width, scene.screen.height
+    start = time.perf_counter()
+    compiled = kernel.compiled()
     trace = rasterize(batch, w, h)
+    first = time.perf_counter() - start
+    if compiled is None:
+        print("rasterizer    numpy path" + ("" if args.numpy else " (numba is not installed)"))
+    else:
+        import numba
+
+        stats = [f.stats for f in (compiled.setup, compiled.emit)]
+        how = ("compiled" if any(s.cache_misses for s in stats) else "loaded from numba's cache at "
+               + str(stats[0].cache_path))
+        print(f"rasterizer    compiled kernels (numba {numba.__version__}), {how}: the first call (numba's "
+              f"import, the kernels, one rasterization) took {first:.1f} s; no timing below includes it")
     best, _ = best_seconds(lambda: rasterize(batch, w, h), args.repeat)
     rate = len(trace) / best
     limit = min(len(batch), 5000)

@@ -8,6 +8,7 @@ large and small) and on a built-in scene, whole and in small pieces.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 
 import numpy as np
@@ -23,10 +24,6 @@ FIELDS = ("x", "y", "z", "rgba", "prim", "opaque")
 needs_numba = pytest.mark.skipif(kernel.compiled() is None, reason="numba is not installed")
 
 
-def _numpy_path(monkeypatch):
-    monkeypatch.setattr(kernel, "_COMPILED", [None])
-
-
 def _assert_same(a, b):
     assert (a.width, a.height) == (b.width, b.height)
     for name in FIELDS:
@@ -35,12 +32,12 @@ def _assert_same(a, b):
 
 @needs_numba
 @pytest.mark.parametrize("cull", ["none", "back", "front"])
-def test_compiled_and_numpy_paths_give_the_same_trace(monkeypatch, cull):
+def test_compiled_and_numpy_paths_give_the_same_trace(cull):
     w, h = 160, 96
     batch = _batch(11, 400, w, h)
     compiled = rasterize(batch, w, h, cull)
-    _numpy_path(monkeypatch)
-    plain = rasterize(batch, w, h, cull)
+    with kernel.numpy_path():
+        plain = rasterize(batch, w, h, cull)
     assert len(compiled) > 10_000
     _assert_same(compiled, plain)
 
@@ -52,24 +49,23 @@ def test_the_paths_agree_on_a_scene_with_clipped_triangles_and_in_small_pieces(m
     compiled = rasterize(batch, 96, 64)
     monkeypatch.setattr(r, "_FRAGMENTS_PER_CALL", 7)   # many emission calls, each a few triangles
     pieces = rasterize(batch, 96, 64)
-    _numpy_path(monkeypatch)
     monkeypatch.setattr(r, "_ROWS_PER_CHUNK", 5)
     monkeypatch.setattr(r, "_FRAGMENTS_PER_CHUNK", 37)
-    plain = rasterize(batch, 96, 64)
+    with kernel.numpy_path():
+        plain = rasterize(batch, 96, 64)
     assert len(compiled) > 1000
     _assert_same(compiled, pieces)
     _assert_same(compiled, plain)
 
 
 @pytest.mark.parametrize("path", ["compiled", "numpy"])
-def test_each_path_is_the_plain_float64_formula_bit_for_bit(monkeypatch, path):
+def test_each_path_is_the_plain_float64_formula_bit_for_bit(path):
     if path == "compiled" and kernel.compiled() is None:
         pytest.skip("numba is not installed")
-    if path == "numpy":
-        _numpy_path(monkeypatch)
     w, h = 128, 80
     batch = _batch(7, 300, w, h)
-    trace = rasterize(batch, w, h)
+    with kernel.numpy_path() if path == "numpy" else contextlib.nullcontext():
+        trace = rasterize(batch, w, h)
     assert len(trace) > 5_000
     z, rgba = _reference(batch, trace, w, h)
     assert _same_bits(trace.z, z)

@@ -30,6 +30,8 @@ kernels. numba is imported on the first rasterization, not with gpusim.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from types import SimpleNamespace
 
 import numpy as np
@@ -205,14 +207,14 @@ def _emit(begin, end, height, ints, floats, offsets, prim, opaque, x, y, z, rgba
         start, stop = offsets[t], offsets[t + 1]
         if start == stop:
             continue
-        pos = start
+        pos, y0 = start, ints[t, Y0]
         for row in range(_spans(ints, t, first, last, state)):     # x and y of each fragment
-            n = last[row] - first[row] + 1
+            lo, n = first[row], last[row] - first[row] + 1
             if n > 0:
                 xs, ys = x[pos:pos + n], y[pos:pos + n]
                 for j in range(n):
-                    xs[j] = first[row] + j
-                    ys[j] = ints[t, Y0] + row
+                    xs[j] = lo + j
+                    ys[j] = y0 + row
                 pos += n
         prim_out[start:stop] = prim[t]
         opaque_out[start:stop] = opaque[t]
@@ -244,6 +246,17 @@ def compiled() -> SimpleNamespace | None:
     if not _COMPILED:
         _COMPILED.append(_compile())
     return _COMPILED[0]
+
+
+@contextmanager
+def numpy_path() -> Iterator[None]:
+    """Within the block the rasterizer takes its numpy path (to compare the two)."""
+    saved = _COMPILED[:]
+    _COMPILED[:] = [None]
+    try:
+        yield
+    finally:
+        _COMPILED[:] = saved
 
 
 def _compile() -> SimpleNamespace | None:
