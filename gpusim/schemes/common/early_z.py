@@ -27,6 +27,7 @@ import numpy as np
 
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OpPlan
+from gpusim.schemes.common.arrays import put_rows
 from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.common.storage import DEPTH_BYTES
 from gpusim.schemes.result import Stat, Structure
@@ -81,7 +82,7 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
         # the last write at a pixel is its nearest opaque fragment (first submitted among equals)
         at = np.flatnonzero(is_opaque & passes)
         winners = order[at[np.r_[pix_sorted[at][1:] != pix_sorted[at][:-1], True]]]
-        opaque_rgb[pix[winners]] = colour_round(np.take(trace.rgba[:, :3], winners, axis=0))
+        put_rows(opaque_rgb, pix[winners], colour_round(np.take(trace.rgba[:, :3], winners, axis=0)))
     uses_z = bool(opaque.any())
     if uses_z:   # every fragment tests the z-buffer
         plan.add(pass_index, "depth_test", "z_buffer", g.n, 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES)

@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
+from gpusim.schemes.common.arrays import put_rows
 
 
 def fold(pix: np.ndarray, by_arrival: np.ndarray, state: np.ndarray,
@@ -32,6 +33,6 @@ def fold(pix: np.ndarray, by_arrival: np.ndarray, state: np.ndarray,
     covered = pix_sorted[start]
     for j, m in enumerate(active):
         rows = covered[:m]
-        state[rows] = step(state[rows], start[:m] + j)
+        put_rows(state, rows, step(np.take(state, rows, axis=0), start[:m] + j))
     return state
 

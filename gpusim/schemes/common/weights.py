@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
+from gpusim.schemes.common.arrays import put_rows
 from gpusim.schemes.common.leading_zeros import colour_bits
 from gpusim.schemes.common.storage import DEPTH_BYTES
 
@@ -34,17 +35,26 @@ Ties = Literal["arrival", "eq4"]
 
 def unorm(values: np.ndarray, bits: int) -> np.ndarray:
     """Values in [0, 1] as ``bits``-bit unsigned normalised integers (round to nearest), int64."""
-    top = (1 << bits) - 1
+    return _unorm_steps(values, bits).astype(np.int64)
+
+
+def _unorm_steps(values: np.ndarray, bits: int) -> np.ndarray:
+    """:func:`unorm` as whole float64 numbers (exact: below 2**53)."""
     v = np.array(values, np.float64)          # a copy: the steps below work in place
     np.clip(v, 0.0, 1.0, out=v)
-    v *= top
-    return np.rint(v, out=v).astype(np.int64)
+    v *= (1 << bits) - 1
+    return np.rint(v, out=v)
 
 
 def unorm_rounder(bits: int):
     """Round float32 values to what a ``bits``-bit unorm channel holds (float32 back)."""
-    top = np.float32((1 << bits) - 1)
-    return lambda v: (unorm(v, bits) / top).astype(np.float32)
+    top = (1 << bits) - 1
+
+    def rnd(v):
+        steps = _unorm_steps(v, bits)
+        steps /= top                          # the int64 unorm / top, without the int64
+        return steps.astype(np.float32)
+    return rnd
 
 
 def check_fragment_bytes(fragment_bytes: int, bits: int) -> None:
@@ -90,7 +100,7 @@ def composite_weighted(pix: np.ndarray, key: np.ndarray, weighted: np.ndarray, a
             w = trans[:m]
         colour[:m] += w[:, None] * np.take(weighted, idx, axis=0)
         trans[:m] *= np.float32(1.0) - alpha[idx]
-    image[covered] = colour + trans[:, None] * image[covered]
+    put_rows(image, covered, colour + trans[:, None] * np.take(image, covered, axis=0))
     return image
 
 
