@@ -21,24 +21,59 @@ RMW_READ, RMW_WRITE = OPS.index("rmw_read"), OPS.index("rmw_write")
 
 def rmw_windows(program: Program, service: np.ndarray, threads: int):
     """(read cycle, write cycle) of each fragment thread (-1 where it has no RMW); ``service``: per row of the
-    coalescer's instructions, the cycle its partition served it (Coalescer.rmw_service_cycles)."""
-    read = np.full(threads, np.iinfo(np.int64).max, np.int64)
-    write = np.full(threads, -1, np.int64)
+    coalescer's instructions, the cycle its partition served it (Coalescer.rmw_service_cycles).
+
+    A thread that read-modify-writes in several passes (a multi-pass k-buffer's peel passes) has a window in
+    each, and passes are barriers: then both are (passes, threads) arrays, a row per pass that holds RMW
+    operations, in pass order."""
     rows = program.rows_of("coalescer")
     r = rows.op == RMW_READ
     w = rows.op == RMW_WRITE
-    np.minimum.at(read, rows.thread[r], service[r])
-    np.maximum.at(write, rows.thread[w], service[w])
+    slot, passes = _pass_slots(program, r | w, rows.thread, threads)
+    read = np.full((passes, threads), np.iinfo(np.int64).max, np.int64)
+    write = np.full((passes, threads), -1, np.int64)
+    np.minimum.at(read, (slot[r], rows.thread[r]), service[r])
+    np.maximum.at(write, (slot[w], rows.thread[w]), service[w])
     read[read == np.iinfo(np.int64).max] = -1
-    return read, write
+    return (read[0], write[0]) if passes == 1 else (read, write)
+
+
+def _pass_slots(program: Program, rmw: np.ndarray, thread: np.ndarray, threads: int):
+    """Per coalescer row, the row of its RMW window (0 for every row unless some thread read-modify-writes in
+    more than one pass: then the rank of the row's pass among the passes with RMW rows), and the count."""
+    zero = np.zeros(len(rmw), np.int64)
+    if not rmw.any():
+        return zero, 1
+    row_pass = program.wi_pass[program.storage("coalescer")[2]]
+    rp, th = row_pass[rmw], thread[rmw]
+    if rp.min() == rp.max():
+        return zero, 1
+    lo = np.full(threads, np.iinfo(np.int64).max, np.int64)
+    hi = np.full(threads, -1, np.int64)
+    np.minimum.at(lo, th, rp)
+    np.maximum.at(hi, th, rp)
+    if not ((hi >= 0) & (lo != hi)).any():     # each thread in one pass (k-buffer batches): one window each
+        return zero, 1
+    passes = np.unique(rp)
+    return np.searchsorted(passes, row_pass), len(passes)
 
 
 def count_hazards(pixel: np.ndarray, read: np.ndarray, write: np.ndarray) -> tuple[int, int]:
-    """(fragments that read an obsolete value, pixels with at least one such fragment)."""
+    """(fragments that read an obsolete value, pixels with at least one such fragment); windows per pass
+    (:func:`rmw_windows`) count a fragment once per pass it read an obsolete value in."""
+    if read.ndim == 1:
+        hazards = _hazard_threads(pixel, read, write)
+        return len(hazards), int(len(np.unique(pixel[hazards])))
+    hazards = np.concatenate([_hazard_threads(pixel, r, w) for r, w in zip(read, write)])
+    return len(hazards), int(len(np.unique(pixel[hazards])))
+
+
+def _hazard_threads(pixel: np.ndarray, read: np.ndarray, write: np.ndarray) -> np.ndarray:
+    """The threads that read before an earlier reader of their pixel had written."""
     has = (read >= 0) & (write >= 0)
     idx = np.flatnonzero(has)
     if not len(idx):
-        return 0, 0
+        return idx
     order = idx[np.lexsort((read[idx], pixel[idx]))]
     pix, rd, wr = pixel[order], read[order], write[order]
     # running maximum of earlier readers' writes inside each pixel
@@ -48,5 +83,4 @@ def count_hazards(pixel: np.ndarray, read: np.ndarray, write: np.ndarray) -> tup
     run = np.maximum.accumulate(wr + offset) - offset
     prev = np.r_[-1, run[:-1]]
     prev[start] = -1
-    hazard = rd < prev
-    return int(hazard.sum()), int(len(np.unique(pix[hazard])))
+    return order[rd < prev]

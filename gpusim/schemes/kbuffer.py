@@ -116,25 +116,8 @@ class KBuffer(Scheme):
         if blend:
             plan.add(0, "store", "framebuffer", P, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES)
-        frags = n
-        at = lambda i, s: entry_index(pix[i], s, k, P, "layer-major") * entry_bytes  # noqa: E731  (k MRT planes)
-        if self.hw == "blender":
-            program_bytes = k * entry_bytes + (FRAMEBUFFER_BYTES if blend else 0)
-            plan.add(frag_pass, "program_blend", "kbuffer", frags, 1, lambda i, s: pix[i] * entry_bytes,
-                     program_bytes)
-        else:
-            if self.hw == "scoreboard":
-                plan.add(frag_pass, "scoreboard", "kbuffer", frags, 1, lambda i, s: pix[i] * entry_bytes, 0)
-            plan.add(frag_pass, "rmw_read", "kbuffer", frags, k, at, entry_bytes, dep=self.hw == "scoreboard")
-            if blend:
-                fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
-                plan.add(frag_pass, "rmw_read", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES)
-            # modify: insert into the k sorted entries; sort-blend: a full buffer composites its nearest
-            insert = k * compare_exchange(COLOUR_BYTES[self.colour_format])
-            plan.compute(frag_pass, frags, insert + (COMPOSITE * (g.arrival >= k) if blend else 0))
-            plan.add(frag_pass, "rmw_write", "kbuffer", frags, k, at, entry_bytes, dep=True)
-            if blend:
-                plan.add(frag_pass, "rmw_write", "framebuffer", frags, 1, fb, FRAMEBUFFER_BYTES, dep=True)
+        composite = COMPOSITE * (g.arrival >= k) if blend else 0   # a full buffer composites its nearest
+        add_rmw(plan, frag_pass, n, pix, P, k, self.colour_format, self.hw, framebuffer=blend, extra=composite)
         pixels = P
         plan.add(resolve, "load", "kbuffer", pixels, k,
                  lambda i, s: entry_index(i, s, k, P, "layer-major") * entry_bytes, entry_bytes)
@@ -169,3 +152,32 @@ class KBuffer(Scheme):
                             overflowed_pixels=0 if blend else int(np.count_nonzero(g.count > k)),
                             lists=CapturedLists(pix[order], submission[order]), stats=stats,
                             submission=submission, extras=extras)
+
+
+def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count: int, k: int, colour_format: str,
+            hw: str, framebuffer: bool = False, extra=0) -> None:
+    """Add each fragment thread's read-modify-write of its pixel's ``k`` entries (section 3.2) to pass
+    ``pass_index`` of ``plan``.
+
+    ``threads``: the fragment threads (an array, or n for 0..n-1); ``pix[i]`` the pixel of thread ``i``.
+    ``hw`` as :class:`KBuffer`'s: k ``rmw_read`` s, the insertion into the k sorted entries (plus ``extra``
+    instructions per thread), k ``rmw_write`` s, behind a ``scoreboard`` dispatch with ``scoreboard``; or one
+    ``program_blend`` with ``blender``. ``framebuffer``: sort-and-blend's RGBA32F target is read and written too.
+    """
+    entry_bytes = DEPTH_BYTES + COLOUR_BYTES[colour_format]
+    at = lambda i, s: entry_index(pix[i], s, k, pixel_count, "layer-major") * entry_bytes  # noqa: E731  (k MRT planes)
+    if hw == "blender":
+        program_bytes = k * entry_bytes + (FRAMEBUFFER_BYTES if framebuffer else 0)
+        plan.add(pass_index, "program_blend", "kbuffer", threads, 1, lambda i, s: pix[i] * entry_bytes, program_bytes)
+        return
+    if hw == "scoreboard":
+        plan.add(pass_index, "scoreboard", "kbuffer", threads, 1, lambda i, s: pix[i] * entry_bytes, 0)
+    plan.add(pass_index, "rmw_read", "kbuffer", threads, k, at, entry_bytes, dep=hw == "scoreboard")
+    fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
+    if framebuffer:
+        plan.add(pass_index, "rmw_read", "framebuffer", threads, 1, fb, FRAMEBUFFER_BYTES)
+    # modify: insert into the k sorted entries (a compare-exchange of depth + colour per entry)
+    plan.compute(pass_index, threads, k * compare_exchange(COLOUR_BYTES[colour_format]) + extra)
+    plan.add(pass_index, "rmw_write", "kbuffer", threads, k, at, entry_bytes, dep=True)
+    if framebuffer:
+        plan.add(pass_index, "rmw_write", "framebuffer", threads, 1, fb, FRAMEBUFFER_BYTES, dep=True)

@@ -102,3 +102,17 @@ def weight_factor_work(fragments: np.ndarray) -> np.ndarray:
 #: a shared-memory atomic add (LucidRaster's per-bin counters in a binning workgroup): the counter's
 #: address (2), the atomic itself (1), the test of its result (1)
 SHARED_ATOMIC = 4
+
+#: a fragment's bucket or histogram bin in its pixel's depth range (bucket depth peeling, Liu et al. 2009):
+#: z - near, the reciprocal of far - near, two multiplies (by it and by the bucket count), a convert, a clamp
+BUCKET_INDEX = 6
+#: one 32-bit output channel of a fragment routed over MRTs: compare the channel's number with the bucket's,
+#: select the depth (or the histogram bit) or the empty value
+CHANNEL_SELECT = 2
+#: one 32-bit word of an occupancy histogram read back: mask the bins below the fragment's, count the bits, add
+POPCOUNT_WORD = 3
+#: the adaptive bucket of an occupied bin: its rank times the buckets over the occupied bins (a multiply, a
+#: reciprocal, a multiply, a convert)
+EQUALISE = 4
+#: the composite's test of one bucket for the empty value (a compare and the branch around its compositing)
+BUCKET_SCAN = 2

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.schemes.base import composite_stored
+from gpusim.schemes.common.arrays import lex_order
 
 
 def make_replay(trace, pix: np.ndarray, key: np.ndarray, k: int, blend: bool, colour_format: str,
@@ -23,42 +24,78 @@ def make_replay(trace, pix: np.ndarray, key: np.ndarray, k: int, blend: bool, co
     """``replay(read_cycle, write_cycle) -> (image, stats)`` for fragment threads of ``trace``."""
 
     def replay(read: np.ndarray, write: np.ndarray):
-        n = len(pix)
-        f = np.flatnonzero((read >= 0) & (write >= 0))
-        times = np.concatenate([read[f], write[f]])
-        kind = np.concatenate([np.ones(len(f), np.int8), np.zeros(len(f), np.int8)])   # writes first
-        frag = np.concatenate([f, f])
-        order = np.lexsort((frag, kind, times, pix[frag]))
-        state: dict[int, tuple] = {}       # pixel -> (entries sorted by (key, index), emitted in order)
-        snap: dict[int, tuple] = {}
-        keys = key.tolist()
-        pix_l = pix.tolist()
-        for e in order.tolist():
-            fr = int(frag[e])
-            p = pix_l[fr]
-            if kind[e]:
-                snap[fr] = state.get(p, ((), ()))
-                continue
-            entries, emitted = snap.pop(fr)
-            merged = sorted(entries + ((keys[fr], fr),))
-            if len(merged) > k:
-                if blend:                  # the nearest leaves and is blended into the framebuffer
-                    emitted = emitted + (merged[0][1],)
-                    merged = merged[1:]
-                else:                      # peel: keep the k nearest
-                    merged = merged[:k]
-            state[p] = (tuple(merged), emitted)
-        seq = []
-        for p in sorted(state):
-            entries, emitted = state[p]
-            seq.extend(emitted)
-            seq.extend(fr for _, fr in entries)
-        order_out = np.asarray(seq, np.int64)
-        image = composite_stored(trace, pix, order_out, colour_format)
-        kept = np.zeros(n, bool)
-        kept[order_out] = True
-        lost = int(np.count_nonzero(~kept[hazard_free]))
-        return image, {"lost_entries": lost, "stored_entries": int(len(order_out)),
-                       "hazard_free_entries": int(len(hazard_free))}
+        return replayed_image(trace, pix, replay_entries(pix, key, k, blend, read, write), colour_format,
+                              hazard_free)
 
     return replay
+
+
+def make_multipass_replay(trace, pix: np.ndarray, key: np.ndarray, k: int, colour_format: str,
+                          hazard_free: np.ndarray):
+    """The same for a multi-pass k-buffer (peel mode, one peel per geometry pass): ``read`` and ``write`` hold
+    one row per pass with RMW operations (or are one row), replayed one after the other (passes are
+    barriers); a pixel composites its entries pass by pass. A pass's fragments are the hazard-free run's,
+    less those not behind the depth the replayed previous pass ended at: a fragment a hazard loses is not
+    looked for again, and none is composited twice."""
+
+    def replay(read: np.ndarray, write: np.ndarray):
+        end = np.full(trace.pixel_count, -1, np.int64)     # depth key the pixel's replayed passes ended at
+        got = []
+        for r, w in zip(np.atleast_2d(read), np.atleast_2d(write)):
+            behind = key.astype(np.int64) > end[pix]
+            entries = replay_entries(pix, key, k, False, np.where(behind, r, -1), np.where(behind, w, -1))
+            got.append(entries)
+            pe = pix[entries]
+            last = entries[np.r_[pe[1:] != pe[:-1], True]] if len(entries) else entries
+            end[pix[last]] = key[last]
+        seq = np.concatenate(got) if got else np.zeros(0, np.int64)
+        rank = np.repeat(np.arange(len(got)), [len(o) for o in got])
+        return replayed_image(trace, pix, seq[lex_order(pix[seq], rank)], colour_format, hazard_free)
+
+    return replay
+
+
+def replayed_image(trace, pix: np.ndarray, order_out: np.ndarray, colour_format: str, hazard_free: np.ndarray):
+    """The image of the entries a replay left (grouped by pixel, in compositing order) and its stats."""
+    image = composite_stored(trace, pix, order_out, colour_format)
+    kept = np.zeros(len(pix), bool)
+    kept[order_out] = True
+    lost = int(np.count_nonzero(~kept[hazard_free]))
+    return image, {"lost_entries": lost, "stored_entries": int(len(order_out)),
+                   "hazard_free_entries": int(len(hazard_free))}
+
+
+def replay_entries(pix: np.ndarray, key: np.ndarray, k: int, blend: bool, read: np.ndarray,
+                   write: np.ndarray) -> np.ndarray:
+    """The fragments the k entries (and, blending, the framebuffer) hold once the fragment threads with a read
+    and a write cycle have run in event order: grouped by pixel ascending, in compositing order."""
+    f = np.flatnonzero((read >= 0) & (write >= 0))
+    times = np.concatenate([read[f], write[f]])
+    kind = np.concatenate([np.ones(len(f), np.int8), np.zeros(len(f), np.int8)])   # writes first
+    frag = np.concatenate([f, f])
+    order = np.lexsort((frag, kind, times, pix[frag]))
+    state: dict[int, tuple] = {}       # pixel -> (entries sorted by (key, index), emitted in order)
+    snap: dict[int, tuple] = {}
+    keys = key.tolist()
+    pix_l = pix.tolist()
+    for e in order.tolist():
+        fr = int(frag[e])
+        p = pix_l[fr]
+        if kind[e]:
+            snap[fr] = state.get(p, ((), ()))
+            continue
+        entries, emitted = snap.pop(fr)
+        merged = sorted(entries + ((keys[fr], fr),))
+        if len(merged) > k:
+            if blend:                  # the nearest leaves and is blended into the framebuffer
+                emitted = emitted + (merged[0][1],)
+                merged = merged[1:]
+            else:                      # peel: keep the k nearest
+                merged = merged[:k]
+        state[p] = (tuple(merged), emitted)
+    seq = []
+    for p in sorted(state):
+        entries, emitted = state[p]
+        seq.extend(emitted)
+        seq.extend(fr for _, fr in entries)
+    return np.asarray(seq, np.int64)

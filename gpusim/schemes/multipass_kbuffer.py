@@ -1,0 +1,140 @@
+"""The multi-pass k-buffer (Liu, Wei, Xu: "Multi-layer depth peeling via fragment sort", Microsoft Research Asia
+technical report, 2006; seed 000 Table 3's "Liu", 5-9 geometry passes, 20 MB).
+
+Depth peeling that peels k layers per geometry pass: each ``peel`` pass captures the next k nearest fragments
+of every pixel with the k-buffer's read-modify-write (gpusim.schemes.kbuffer in ``peel`` mode, the same
+``hw`` choices: on current hardware k ``rmw_read`` and k ``rmw_write`` per fragment through the texture path,
+with the same RMW hazards), then a full-screen ``resolve`` composites the pass's entries under the colour
+accumulated so far (a ``blend`` into ``accumulation``, RGBA32F) and stores the farthest as the pixel's
+``peel_depth``. From the second peel pass on every fragment loads its pixel's peel depth and goes on only when
+strictly behind it (``PEEL_TEST``, as depth peeling); a ``clear`` pass empties the k entries before each peel
+pass after the first. Passes go on until no fragment is left: with ``termination = known-layers`` the last
+one is the last to capture anything (ceil(L / k) passes for L distinct depths), with ``occlusion-query`` one
+more runs whose query finds no fragment left.
+
+Equal depths: inside a pass as the k-buffer (a fragment goes behind stored ones of equal depth, so the first
+submitted is nearer); fragments of the depth a pass ended at that did not fit in its k entries are never
+captured (the next pass takes only depths strictly behind): ``tie_losses``, the ``dropped_fragments``.
+
+The functional model is the hazard-free result. ``extras["rmw_replay"]`` replays each peel pass in the
+timing model's event order (gpusim.schemes.common.kbuffer_replay), on the fragments the hazard-free pass had
+that lie behind the depth the replayed previous pass ended at: a fragment a hazard loses is lost for good.
+The timing is the hazard-free run's: its passes and their fragments do not follow the hazards.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.opplan import OpPlan, Pass
+from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.common.alu import COMPOSITE, PEEL_TEST
+from gpusim.schemes.common.arrays import entry_index, lex_order, rank_in_runs
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.kbuffer_replay import make_multipass_replay
+from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
+from gpusim.schemes.kbuffer import FRAMEBUFFER_BYTES, add_rmw
+from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
+
+
+def peel_in_passes(pix: np.ndarray, key: np.ndarray, by_depth: np.ndarray, k: int, pixel_count: int) -> list[tuple]:
+    """Each pass's (fragments that pass the peel test, fragments kept), both grouped by pixel, nearest first:
+    a pass keeps the k nearest of its pixel's fragments strictly behind the farthest the previous pass kept
+    (``by_depth``: every fragment grouped by pixel, nearest first, equal depths in submission order)."""
+    out = []
+    alive = by_depth
+    end = np.full(pixel_count, -1, np.int64)   # the depth key each pixel's last pass ended at
+    while len(alive):
+        keep = rank_in_runs(pix[alive]) < k
+        kept = alive[keep]
+        out.append((alive, kept))
+        pk = pix[kept]
+        last = kept[np.r_[pk[1:] != pk[:-1], True]]
+        end[pix[last]] = key[last]
+        rest = alive[~keep]
+        alive = rest[key[rest].astype(np.int64) > end[pix[rest]]]
+    return out
+
+
+@register("multipass-kbuffer")
+@dataclass(frozen=True)
+class MultipassKBuffer(Scheme):
+    summary = "multi-pass k-buffer: k layers peeled per geometry pass through a k-entry RMW buffer (Liu et al. 2006)"
+
+    k: int = param(8, unit="entries/pixel", doc="k-buffer entries per pixel: layers peeled per geometry pass",
+                   min=1, max=64)
+    colour_format: ColourFormat = param("rgba32f", doc="entry colour format")
+    termination: Literal["known-layers", "occlusion-query"] = param(
+        "known-layers", doc="stop after the last pass that captures anything, or run one more whose occlusion "
+                            "query finds no fragment left")
+    hw: Literal["texture-rmw", "scoreboard", "blender"] = param(
+        "texture-rmw", doc="where the RMW runs (as the k-buffer's): texture reads in the shader, behind a "
+                           "dispatch scoreboard, or in a programmable blender")
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P, k, pix = len(trace), trace.pixel_count, self.k, g.pix
+        fmt = self.colour_format
+        entry_bytes = DEPTH_BYTES + COLOUR_BYTES[fmt]
+        peels = peel_in_passes(pix, g.key, g.by_depth, k, P)
+        m = len(peels)
+        total = m + (1 if self.termination == "occlusion-query" and n else 0)
+
+        passes, peel_at, resolve_at = [Pass("clear 0", "clear", "entry")], [], []
+        for p in range(max(total, 1)):
+            if p:
+                passes.append(Pass(f"clear {p}", "clear", "entry"))
+            peel_at.append(len(passes))
+            passes.append(Pass(f"peel {p}", "geometry", "fragment"))
+            if p < m:
+                resolve_at.append(len(passes))
+                passes.append(Pass(f"resolve {p}", "fullscreen", "pixel"))
+        plan = OpPlan(passes, ["kbuffer", "peel_depth", "accumulation"])
+        entries = lambda i, s: i * entry_bytes  # noqa: E731
+        plan.add(0, "store", "kbuffer", P * k, 1, entries, entry_bytes)
+        plan.add(0, "store", "peel_depth", P, 1, lambda i, s: i * DEPTH_BYTES, DEPTH_BYTES)
+        plan.add(0, "store", "accumulation", P, 1, lambda i, s: i * FRAMEBUFFER_BYTES, FRAMEBUFFER_BYTES)
+        for p in range(1, m):
+            plan.add(peel_at[p] - 1, "store", "kbuffer", P * k, 1, entries, entry_bytes)
+        # every pass after the first: the pixel's peel depth, strictly behind it or discard
+        later = np.asarray(peel_at[1:], np.int64)
+        plan.add(0, "load", "peel_depth", n, total - 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES,
+                 seq_pass=later)
+        plan.compute(0, n, PEEL_TEST, count=max(total - 1, 0), seq_pass=later)
+        for p, (alive, kept) in enumerate(peels):
+            threads = np.sort(alive)
+            add_rmw(plan, peel_at[p], threads, pix[threads], P, k, fmt, self.hw)
+            stored = np.bincount(pix[kept], minlength=P)
+            r = resolve_at[p]
+            plan.add(r, "load", "kbuffer", P, k, lambda i, s: entry_index(i, s, k, P, "layer-major") * entry_bytes,
+                     entry_bytes)
+            plan.compute(r, P, stored * COMPOSITE)
+            done = np.flatnonzero(stored)          # pixels with entries: blend them in, keep the peel depth
+            plan.add(r, "blend", "accumulation", done, 1, lambda i, s, d=done: d[i] * FRAMEBUFFER_BYTES,
+                     FRAMEBUFFER_BYTES, dep=True)
+            plan.add(r, "store", "peel_depth", done, 1, lambda i, s, d=done: d[i] * DEPTH_BYTES, DEPTH_BYTES)
+
+        kept_all = np.concatenate([kept for _, kept in peels]) if peels else np.zeros(0, np.int64)
+        rank = np.repeat(np.arange(m), [len(kept) for _, kept in peels])
+        order = kept_all[lex_order(pix[kept_all], rank)]        # pass by pass, each nearest first: depth order
+        lost = n - len(order)
+        kept_n = np.bincount(pix[order], minlength=P)
+        struct = [Structure("kbuffer", entry_bytes, P * k, int(kept_n.clip(max=k).sum()),
+                            f"k entries of depth + {fmt} colour (emptied before each peel pass)"),
+                  Structure("peel_depth", DEPTH_BYTES, P, g.covered, "depth the pixel's previous pass ended at"),
+                  Structure("accumulation", FRAMEBUFFER_BYTES, P, g.covered, "RGBA32F colour composited so far")]
+        stats = {"tie_losses": Stat(int(lost), "fragments", "fragments at the depth a pass ended at that did "
+                                    "not fit in its k entries: never captured"),
+                 "layers": Stat(int(g.layers.max(initial=0)), "layers", "largest number of distinct depths of a "
+                                "pixel")}
+        extras = {}
+        if self.hw != "blender":
+            extras["rmw_replay"] = make_multipass_replay(trace, pix, g.key, k, fmt, order)
+        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, fmt), n, g.covered,
+                            struct, plan, geometry_passes=total, dropped_fragments=int(lost),
+                            overflowed_pixels=int(np.count_nonzero(g.count > kept_n)),
+                            lists=CapturedLists(pix[order], order), stats=stats, extras=extras)
