@@ -108,6 +108,12 @@ SPECS = {
     "freepipe-abuffer": Spec("rgba8", capacity="first", limit=_param("freepipe-abuffer", "layers")),
     "freepipe-mdts": Spec("rgba8", capacity="nearest", limit=_param("freepipe-mdts", "layers"), ties="last-colour"),
     "kbuffer": Spec("rgba32f", capacity="nearest", limit=_param("kbuffer", "k")),
+    # "peel": the k nearest per pass behind the previous pass's farthest (exact on distinct depths)
+    "multipass-kbuffer": Spec("rgba32f", capacity="peel", limit=_param("multipass-kbuffer", "k")),
+    # "bucket": one fragment per depth bucket, the farthest; exact while a pixel has at most 2 distinct depths
+    # (its near and far: buckets 0 and 31)
+    "bucket-depth-peeling": Spec(None, capacity="bucket", limit=2),
+    "adaptive-bucket-depth-peeling": Spec(None, capacity="bucket", limit=2),
     "linked-list": Spec("rgba8", capacity="pool", limit=_param("linked-list", "pool_nodes_per_pixel"),
                         ties="reverse"),
     "lucidraster": Spec(None, capacity="filter", limit=_param("lucidraster", "depth_filter")),
@@ -124,7 +130,10 @@ EXACT = [n for n in ALL if SPECS[n].exact]
 OPAQUE_ONLY = {"zbuffer"}
 # alpha-blend blends in submission order by design
 ORDER_INDEPENDENT = [n for n in ALL if n != "alpha-blend" and n not in OPAQUE_ONLY]
-LOSSY = [n for n in ALL if SPECS[n].capacity in ("first", "nearest", "pool")]
+LOSSY = [n for n in ALL if SPECS[n].capacity in ("first", "nearest", "pool", "bucket", "peel")]
+#: a fragment added to a pixel moves its depth range, and with it every bucket boundary: an alpha-0 fragment
+#: can part two colliding fragments or join two others
+RANGE_BUCKETS = {n for n in ALL if SPECS[n].capacity == "bucket"}
 
 
 def test_every_registered_scheme_has_a_spec():
@@ -240,6 +249,8 @@ def capacity_kwargs(name, spare=0) -> dict:
         return {"per_pixel": int(s.limit) - spare}
     if s.capacity == "pool":
         return {"pool_per_pixel": s.limit, "spare": spare}
+    if s.capacity == "bucket":
+        return {"per_pixel": int(s.limit) - spare}
     return {}
 
 
@@ -278,6 +289,10 @@ def documented_order(name, trace) -> np.ndarray:
         keep &= nearness < s.limit
     elif s.capacity == "pool":
         keep &= idx < int(np.ceil(s.limit * trace.pixel_count))
+    elif s.capacity == "bucket":
+        keep &= bucket_kept(name, trace)
+    elif s.capacity == "peel":
+        keep &= peel_kept(trace, int(s.limit))
     group = pix * (1 << 32) + key                       # (pixel, depth)
     _, first_of, inverse = np.unique(group, return_index=True, return_inverse=True)
     if s.ties == "first-only":                          # depth peeling: the first submitted wins the tie
@@ -308,6 +323,51 @@ def documented_order(name, trace) -> np.ndarray:
         tiebreak = np.where(trace.opaque, idx, tiebreak)
     sel = idx[keep]
     return sel[np.lexsort((tiebreak[sel], opaque_rank[sel], key[sel], pix[sel]))]
+
+
+def bucket_kept(name, trace) -> np.ndarray:
+    """Bucket depth peeling's kept fragments (docs/schemes.md): each pixel's range [near, far] split into 32
+    uniform buckets (the adaptive scheme: 512 uniform bins, the r-th of O occupied bins in bucket r, or
+    floor(32 r / O) past 32), float32 arithmetic; per bucket the farthest, of equal depths the first
+    submitted."""
+    pix, z, n = trace.pixel_ids(), trace.z.astype(np.float32), len(trace)
+    near = np.full(trace.pixel_count, np.inf, np.float32)
+    far = np.full(trace.pixel_count, -np.inf, np.float32)
+    np.minimum.at(near, pix, z)
+    np.maximum.at(far, pix, z)
+    span = (far - near)[pix]
+    t = np.zeros(n, np.float32)
+    np.divide(z - near[pix], span, out=t, where=span > 0)
+    if name == "bucket-depth-peeling":
+        bucket = np.minimum((t * np.float32(32)).astype(np.int64), 31)
+    else:
+        bins = np.minimum((t * np.float32(512)).astype(np.int64), 511)
+        bucket = np.zeros(n, np.int64)
+        for p in np.unique(pix):
+            at = pix == p
+            occupied = np.unique(bins[at])
+            rank = np.searchsorted(occupied, bins[at])
+            bucket[at] = rank if len(occupied) <= 32 else rank * 32 // len(occupied)
+    key = depth_key(trace.z).astype(np.int64)
+    order = np.lexsort((np.arange(n), -key, bucket, pix))          # farthest first, ties in submission order
+    first = np.r_[True, (pix[order][1:] != pix[order][:-1]) | (bucket[order][1:] != bucket[order][:-1])][:n]
+    keep = np.zeros(n, bool)
+    keep[order[first]] = True
+    return keep
+
+
+def peel_kept(trace, k: int) -> np.ndarray:
+    """The multi-pass k-buffer's kept fragments: pass after pass, each pixel's k nearest (equal depths in
+    submission order) strictly behind the farthest its previous pass kept."""
+    pix, key = trace.pixel_ids(), depth_key(trace.z).astype(np.int64)
+    keep = np.zeros(len(trace), bool)
+    for p in np.unique(pix):
+        left = sorted(np.flatnonzero(pix == p).tolist(), key=lambda i: (key[i], i))
+        while left:
+            kept = left[:k]
+            keep[kept] = True
+            left = [i for i in left[k:] if key[i] > key[kept[-1]]]
+    return keep
 
 
 ROUND = {"rgba8": rounder("rgba8"), "rgba32f": rounder("rgba32f"), "unorm8": unorm_rounder(8),
@@ -434,7 +494,7 @@ def documented_drops(name, trace) -> tuple[int, int]:
     if s.capacity == "pool":
         pool = int(np.ceil(s.limit * trace.pixel_count))
         return max(n - pool, 0), len(np.unique(pix[pool:]))
-    if s.ties == "first-only":                      # depth peeling: tie losses
+    if s.ties == "first-only" or s.capacity in ("bucket", "peel"):   # depth peeling's tie losses, collisions
         order = documented_order(name, trace)
         return n - len(order), int(np.count_nonzero(count > np.bincount(pix[order], minlength=trace.pixel_count)))
     return 0, 0
@@ -516,15 +576,15 @@ def wboit_order_tolerance(trace, orders=2) -> np.ndarray:
     return orders * one_order + f32_tolerance(m)
 
 
-@pytest.mark.parametrize("name", [n for n in ALL if n not in OPAQUE_ONLY])
+@pytest.mark.parametrize("name", [n for n in ALL if n not in OPAQUE_ONLY | RANGE_BUCKETS])
 @SETTINGS
 @given(data=st.data())
 def test_a_fully_transparent_fragment_changes_nothing(name, data):
     s = SPECS[name]
     # a bitonic network (tie rule None) and dual depth peeling's front/back rule can move equal depths when
-    # their pixel gains a layer: for those, no ties. A stored alpha-0 fragment takes a slot, so a full pixel
-    # (or pool) would drop another: leave room for it.
-    predictable_ties = s.ties not in (None, "dual") or not s.exact
+    # their pixel gains a layer, and so can the multi-pass k-buffer (where a pass ends moves): for those, no
+    # ties. A stored alpha-0 fragment takes a slot, so a full pixel (or pool) would drop another: leave room.
+    predictable_ties = (s.ties not in (None, "dual") and s.capacity != "peel") or not s.exact
     trace = data.draw(traces(max_n=59, distinct=not predictable_ties, **capacity_kwargs(name, spare=1)),
                       label="trace")
     n, pix, key = len(trace), trace.pixel_ids(), depth_key(trace.z)

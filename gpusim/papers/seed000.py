@@ -37,9 +37,11 @@ TABLE_3 = {
     "DDP": ((40, 34, 23, 8, 160), (8, 8, 8, 6, 8), 4),
     "DP": ((29, 26, 14, 5, 128), (13, 13, 13, 9, 13), 2),
 }
-#: Table 3's methods as gpusim variants (None: not modelled)
-VARIANT = {"MDTS": "freepipe-mdts", "ABS": "freepipe-abuffer", "K-buffer": "kbuffer", "BDP": None, "BDP2": None,
-           "ADP": None, "SRAB": "stencil-routed-abuffer", "Liu": None, "DDP": "dual-depth-peeling",
+#: Table 3's methods as the experiment's variants (None: not modelled): BDP, BDP2 and ADP are bucket depth
+#: peeling (Liu et al., HPG 2009) uniform, over two passes and adaptive; "Liu" is the multi-pass k-buffer of Liu,
+#: Wei and Xu 2006
+VARIANT = {"MDTS": "freepipe-mdts", "ABS": "freepipe-abuffer", "K-buffer": "kbuffer", "BDP": "bdp", "BDP2": "bdp2",
+           "ADP": "adp", "SRAB": "stencil-routed-abuffer", "Liu": "liu", "DDP": "dual-depth-peeling",
            "DP": "depth-peeling"}
 #: the ratios section 5 argues from (Table 3, same model); every other pair of modelled methods is compared too
 RATIOS = (("ABS", "MDTS"), ("MDTS", "DP"), ("ABS", "DP"), ("MDTS", "DDP"), ("ABS", "SRAB"), ("K-buffer", "ABS"),
@@ -75,7 +77,20 @@ def _passes(results: pd.DataFrame, scene: str, variant: str) -> float:
 #: depth textures); colour arrays, stencils and accumulation targets are gpusim structures of their own
 COUNTED = {"freepipe-mdts": ("depth_array",), "freepipe-abuffer": ("depth_array", "counter"),
            "kbuffer": ("kbuffer",), "stencil-routed-abuffer": ("samples",), "dual-depth-peeling": ("minmax_depth",),
-           "depth-peeling": ("depth_buffer", "peel_depth")}
+           "depth-peeling": ("depth_buffer", "peel_depth"), "bdp": ("buckets",), "bdp2": ("buckets",),
+           "adp": ("histogram", "buckets"), "liu": ("kbuffer",)}
+#: what a memory row says of the structures it counts (the default: the FreePipe schemes' note)
+MEMORY_NOTE = {
+    "bdp": "32 buckets of a 32-bit depth (8 RGBA32F targets) at 512x512; the RG32F depth range beside them "
+           "(2 MB) is not counted, as the paper's 32 MB leaves it out",
+    "bdp2": "two arrays of 32 buckets, one per half of the depth range, at 512x512; the depth range (2 MB) is not "
+            "counted",
+    "adp": "the 512-bin occupancy histogram (4 RGBA32UI targets, 16 MB) and the 32 buckets (32 MB) at 512x512; "
+           "the paper's 52 MB holds 4 MB more that its description does not account for (the RG32F depth range "
+           "is 2 MB)",
+    "liu": "k = 4 entries of depth + RGBA32F (80 bytes a pixel) at 512x512; the peel depth (1 MB) and the RGBA32F "
+           "accumulation (4 MB) are not counted",
+}
 
 
 def _memory_mb(results: pd.DataFrame, stats: pd.DataFrame, variant: str) -> float:
@@ -113,10 +128,11 @@ def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
                                  "gpusim has no model of this method yet"))
             continue
         counted = ", ".join(COUNTED[variant])
+        note = MEMORY_NOTE.get(variant, "at 512x512 with the scheme's defaults (20 layers, 8 samples, k = 8); the "
+                               "paper counts depth entries, not the colour structures we report beside them")
         rows.append(guarded(lambda v=variant: _memory_mb(results, stats, v), "000 Table 3 / §5.2",
-                            f"{method} memory (MB)", mb,
-                            f"{counted} at 512x512 with the scheme's defaults (20 layers, 8 samples, k = 8); the "
-                            "paper counts depth entries, not the colour structures we report beside them"))
+                            f"{method} memory (MB)", mb, f"{counted}: {note}" if variant in MEMORY_NOTE
+                            else f"{counted} {note}"))
     rows += _table_2(results)
     for method, (rates, variant) in TABLE_1_001.items():
         for i, model in enumerate(CUDP_MODELS):
