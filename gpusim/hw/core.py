@@ -136,10 +136,12 @@ class SimtCore(Unit):
         first = p.first_warp
         while queue:
             w = queue.popleft()
+            key = env.key = first + w                # its events come in warp order among simultaneous ones
             self.running += 1
             now = env.now
             t = ready[w] if ready is not None and ready[w] > now else now
             yield timeout(t - now)                   # a queue entry even at once: warps start in order
+            env.key = key
             now = t
             value = done = now
             lo = wi_start[w]
@@ -147,6 +149,7 @@ class SimtCore(Unit):
                 if u == COMPUTE:                     # ALU work: holds the port, the next instruction waits
                     if dep and value > now:          # it works on a loaded value: wait for it
                         yield timeout(value - now)
+                        env.key = key
                         now = value
                     f = sm_free[sm]
                     sm_free[sm] = (f if f > now else now) + cyc
@@ -155,11 +158,13 @@ class SimtCore(Unit):
                     continue
                 if dep and value > now:              # wait for the result it depends on
                     yield timeout(value - now)
+                    env.key = key
                     now = value
                 f = sm_free[sm]
                 if f > now:                          # the issue port is taken until f
                     sm_free[sm] = f + cyc
                     yield timeout(f - now)
+                    env.key = key
                     now = f
                 else:
                     sm_free[sm] = now + cyc
@@ -170,6 +175,9 @@ class SimtCore(Unit):
                         self.machine.all_waiting()
                     yield d
                     del self.waiting[first + w]
+                    env.key = key                    # woken: retry in warp order among this cycle's events
+                    yield timeout(0)
+                    env.key = key
                     now = env.now
                     d = serve[u](wi, now)
                 self.last_progress = now

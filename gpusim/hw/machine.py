@@ -23,8 +23,11 @@ from __future__ import annotations
 
 import gc
 import sys
+from heapq import heappush
 
 import simpy
+from simpy.core import NORMAL
+from simpy.events import Event
 
 from gpusim.errors import GpusimError
 from gpusim.hw import gpu as _gpu  # noqa: F401  (registers every unit)
@@ -38,6 +41,24 @@ from gpusim.hw.unit import UNITS
 PROGRESS_CYCLES = 4096      # cycles between progress-bar updates (an event each: a fraction of a percent)
 
 
+KEY_SHIFT = 40             # an event's queue key: its owner's key above, its creation number below
+LAST_KEY = (1 << 62) - 1   # the watchdog's key: after every warp's events of the same cycle
+
+
+class OrderedEnvironment(simpy.Environment):
+    """A simpy environment that takes simultaneous events (same cycle, same priority) in the order of their
+    owner's ``key`` (the core sets it to the warp a process runs before the process yields), not in the
+    order they were created. A unit's wake-up (a plain event it triggers: a free reorder-buffer entry, a
+    scoreboard cell) comes first, and the warps it wakes retry in warp order (gpusim.hw.core). A warp has at
+    most one event pending, so the cycles do not depend on the order simultaneous events are created in."""
+
+    key = 0
+
+    def schedule(self, event, priority=NORMAL, delay=0) -> None:
+        key = -1 if type(event) is Event else self.key
+        heappush(self._queue, (self._now + delay, priority, (key << KEY_SHIFT) + next(self._eid), event))
+
+
 class NoProgress(GpusimError):
     """The event model stopped making progress (a diagnosis names the unit and queue)."""
 
@@ -48,7 +69,7 @@ class Machine:
     def __init__(self, gpu, program: Program, width: int, progress=None):
         self.gpu, self.program, self.width = gpu, program, width
         self.progress = progress                 # a tqdm-like bar counting warps done, or None
-        self.env = simpy.Environment()
+        self.env = OrderedEnvironment()
         self.warp_end_hooks: list = []           # called (warp, cycle its last operation completes)
         self.units: dict = {}
         self.pass_cycles: list[int] = []
@@ -136,7 +157,7 @@ class Machine:
             start = self.now
             self._advance(start + overhead)          # the driver issues the pass
             if p.kind == "flush":
-                self._advance(start + self.core.flush_cycles(p.flush_warps))
+                self._advance(start + overhead + self.core.flush_cycles(p.flush_warps))   # after the driver
             elif p.warps:
                 self._run_pass(p)
             self.guard_max(self.now)
@@ -191,6 +212,7 @@ class Machine:
         runner, core, env = self.gpu.runner, self.core, self.env
         while True:
             deadline = min(core.last_progress + runner.no_progress_cycles, runner.max_cycles)
+            env.key = LAST_KEY                   # after the warps' issues of the same cycle
             yield env.timeout(max(0, deadline - env.now) + 1)
             if finished.triggered or self.current_pass != index:
                 return
