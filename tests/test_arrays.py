@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from gpusim.schemes.common.arrays import lex_order, reversed_runs
+from gpusim.schemes.common.arrays import lex_order, lex_sorted, reversed_runs, sort_within_runs
 from gpusim.schemes.common.sections import SectionIndex
 
 _DTYPES = [np.bool_, np.uint8, np.int8, np.uint16, np.int32, np.uint32, np.int64, np.uint64]
@@ -33,6 +33,10 @@ def test_lex_order_is_numpys_stable_lexsort(keys):
     got = lex_order(*keys)
     assert got.dtype == np.intp
     np.testing.assert_array_equal(got, want)
+    perm, first = lex_sorted(*keys)            # the leading key in order, read off the sorted word
+    np.testing.assert_array_equal(perm, want)
+    assert first.dtype == keys[0].dtype
+    np.testing.assert_array_equal(first, keys[0][want])
 
 
 def test_lex_order_on_millions_of_unordered_pixel_depth_keys():
@@ -44,6 +48,8 @@ def test_lex_order_on_millions_of_unordered_pixel_depth_keys():
     key[rng.random(n) < 0.3] = 0x3F000000                       # many exact ties
     tie = rng.integers(-n, n, n)
     np.testing.assert_array_equal(lex_order(pix, key), np.lexsort((key, pix)))
+    perm, pix_sorted = lex_sorted(pix, key)
+    np.testing.assert_array_equal(pix_sorted, pix[perm])
     np.testing.assert_array_equal(lex_order(pix, key, tie), np.lexsort((tie, key, pix)))
 
 
@@ -73,3 +79,12 @@ def test_section_index_finds_every_section_whatever_the_query_order():
     chain[0] += 5                               # a gap in a pixel's chain has no place in the index
     with pytest.raises(ValueError, match="without gaps"):
         SectionIndex(pixel, chain, ids)
+
+
+def test_sort_within_runs_sorts_each_run_where_it_stands():
+    pix = np.array([5, 5, 5, 2, 2, 9])
+    key = np.array([3, 1, 3, 7, 0, 2], np.uint32)
+    np.testing.assert_array_equal(sort_within_runs(pix, key), [1, 0, 2, 4, 3, 5])
+    ascending = np.sort(pix)
+    np.testing.assert_array_equal(sort_within_runs(ascending, key), lex_order(ascending, key))
+    assert len(sort_within_runs(np.zeros(0, np.int64), np.zeros(0, np.uint32))) == 0

@@ -82,11 +82,14 @@ def composite_image(trace: FragmentTrace, pix: np.ndarray, rgba: np.ndarray, alp
     return image.reshape(trace.height, trace.width, 3)
 
 
-def composite_stored(trace: FragmentTrace, pix: np.ndarray, order: np.ndarray, colour_format: str) -> np.ndarray:
+def composite_stored(trace: FragmentTrace, pix: np.ndarray, order: np.ndarray, colour_format: str,
+                     order_pix: np.ndarray | None = None) -> np.ndarray:
     """Image of fragments ``order`` (grouped by pixel, in compositing order) as a scheme stored them.
 
     Colours are rounded to ``colour_format``; opaque fragments count as alpha 1.
-    ``pix`` is the pixel id of every fragment of ``trace``.
+    ``pix`` is the pixel id of every fragment of ``trace``; ``order_pix`` is ``pix[order]`` when
+    the caller has it.
     """
     rgba = store_colour(np.take(trace.rgba, order, axis=0), colour_format)   # take: rows faster than [order]
-    return composite_image(trace, pix[order], rgba, effective_alpha(rgba, trace.opaque[order]))
+    order_pix = pix[order] if order_pix is None else order_pix
+    return composite_image(trace, order_pix, rgba, effective_alpha(rgba, trace.opaque[order]))

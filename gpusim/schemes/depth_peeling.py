@@ -101,21 +101,22 @@ class DepthPeeling(Scheme):
         plan.add(0, "blend", "accumulation", pixels, peeled, lambda i, s: i * cb, cb, dep=True,
                  seq_pass=2 * np.arange(peels) + 1)
 
-        order = g.by_depth
-        first_of_depth = np.r_[True, (pix[order][1:] != pix[order][:-1])
-                               | (g.key[order][1:] != g.key[order][:-1])][:n]   # [:n]: no entry when n = 0
-        keep = first_of_depth & (d[order] < peels)
-        lost = order[~keep]                        # tie losses and layers past the cap
-        order = order[keep]
+        order, ps, ks = g.by_depth, g.pix_by_depth, g.key_by_depth
+        first_of_depth = np.r_[True, (ps[1:] != ps[:-1]) | (ks[1:] != ks[:-1])][:n]   # [:n]: no entry when n = 0
+        keep = first_of_depth & (g.distinct_rank_by_depth < peels)
+        lost = ps[~keep]                           # pixels of tie losses and layers past the cap, ascending
+        overflowed = int(len(lost) and 1 + np.count_nonzero(lost[1:] != lost[:-1]))
+        order, ps = order[keep], ps[keep]
         ties = int(n - np.count_nonzero(first_of_depth))
         struct = [Structure("depth_buffer", DEPTH_BYTES, P, g.covered, "depth of the layer being peeled"),
                   Structure("peel_depth", DEPTH_BYTES, P, g.covered, "depth peeled by the previous pass"),
                   Structure("layer_colour", cb, P, g.covered, f"{self.colour_format} colour of the peeled layer"),
                   Structure("accumulation", cb, P, g.covered, "front-to-back accumulated colour")]
-        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n, g.covered,
+        image = composite_stored(trace, pix, order, self.colour_format, ps)
+        return SchemeResult(self.name, self.params(), image, n, g.covered,
                             struct, plan, geometry_passes=total, dropped_fragments=int(n - len(order)),
-                            overflowed_pixels=len(np.unique(pix[lost])),
-                            lists=CapturedLists(pix[order], order),
+                            overflowed_pixels=overflowed,
+                            lists=CapturedLists(ps, order),
                             stats={"tie_losses": Stat(ties, "fragments", "fragments never peeled: equal depth to a "
                                                       "fragment submitted earlier"),
                                    "layers": Stat(need, "layers", "largest number of distinct depths of a pixel")})

@@ -78,10 +78,10 @@ class FreePipeABuffer(Scheme):
                      + kept_n * (COMPOSITE + unpack))
 
         # resolve: the kept fragments of each pixel in load (arrival) order, sorted in registers
-        loaded = g.by_arrival[kept[g.by_arrival]]
-        perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)
-        order = loaded[perm]
-        image = composite_stored(trace, pix, order, self.colour_format)
+        loaded, loaded_pix = g.first_arrivals(L)
+        perm, compares = sort_runs(loaded_pix, g.key[loaded], self.sort)
+        order = loaded[perm]                       # runs stay in place: loaded_pix is pix[order]
+        image = composite_stored(trace, pix, order, self.colour_format, loaded_pix)
 
         covered = g.covered
         struct = [
@@ -93,7 +93,7 @@ class FreePipeABuffer(Scheme):
         return SchemeResult(
             self.name, self.params(), image, n, covered, struct, plan, geometry_passes=1,
             dropped_fragments=int((g.count - kept_n).sum()), overflowed_pixels=int(over.sum()),
-            lists=CapturedLists(pix[order], order),
+            lists=CapturedLists(loaded_pix, order),
             stats={"sort_compares": Stat(compares, "compares", f"{self.sort} sort compare operations in the resolve"),
                    "max_fragments_per_pixel": Stat(int(g.count.max(initial=0)), "fragments",
                                                    "largest counter value reached")})

@@ -177,7 +177,7 @@ class FreePipeMDTS(Scheme):
         cb = COLOUR_BYTES[self.colour_format]
         slot_of_kept = rank_in_runs(pix[kd])
         value = np.empty(n, np.int64)          # id of each fragment's (pixel, depth) value
-        value[g.by_depth] = distinct_ids(pix[g.by_depth], g.key[g.by_depth])[0]
+        value[g.by_depth] = distinct_ids(g.pix_by_depth, g.key_by_depth)[0]
         # equal values sit next to each other in the array: the first occurrence is the lowest slot
         kept_value = value[kd]
         first = np.flatnonzero(np.r_[True, kept_value[1:] != kept_value[:-1]]) if len(kd) else kd

@@ -124,19 +124,20 @@ class LinkedList(Scheme):
         unpack = UNPACK_RGBA8 if self.colour_format == "rgba8" else 0
         plan.compute(2, pixels, sort_compares(loads, self.sort) * exchange + loads * (COMPOSITE + unpack))
 
-        loaded = w_node[keep]                              # walk order: most recent first
-        perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)
-        order = loaded[perm]
+        loaded, loaded_pix = w_node[keep], w_pix[keep]     # walk order: most recent first
+        perm, compares = sort_runs(loaded_pix, g.key[loaded], self.sort)
+        order = loaded[perm]                               # runs stay in place: loaded_pix is pix[order]
         overflow = n - len(alloc_idx)
         struct = [Structure("head", POINTER_BYTES, P, g.covered, "head node index per pixel"),
                   Structure("nodes", node_bytes, pool, len(alloc_idx),
                             f"node: {self.colour_format} colour, depth, next index"),
                   Structure("counter", POINTER_BYTES, 1, 1 if n else 0, "global node allocation counter")]
-        lost = np.bincount(pix, minlength=P) > np.bincount(pix[order], minlength=P)
-        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n,
+        lost = g.count > np.bincount(loaded_pix, minlength=P)
+        image = composite_stored(trace, pix, order, self.colour_format, loaded_pix)
+        return SchemeResult(self.name, self.params(), image, n,
                             g.covered, struct, plan, geometry_passes=1,
                             dropped_fragments=int(n - len(order)), overflowed_pixels=int(lost.sum()),
-                            lists=CapturedLists(pix[order], order),
+                            lists=CapturedLists(loaded_pix, order),
                             stats={"pool_overflow": Stat(int(overflow), "fragments", "fragments past the pool's end"),
                                    "walk_visits": Stat(int(len(w_node)), "nodes", "nodes the resolve walk reached"),
                                    "sort_compares": Stat(compares, "compares", f"{self.sort} sort compares")},

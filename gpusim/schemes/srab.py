@@ -75,16 +75,17 @@ class StencilRoutedABuffer(Scheme):
         exchange = compare_exchange(COLOUR_BYTES[self.colour_format])
         plan.compute(len(passes) - 1, P, sort_compares(kept_n, self.sort) * exchange + kept_n * COMPOSITE)
 
-        loaded = g.by_arrival[g.arrival[g.by_arrival] < k]
-        perm, compares = sort_runs(pix[loaded], g.key[loaded], self.sort)
-        order = loaded[perm]
+        loaded, loaded_pix = g.first_arrivals(k)
+        perm, compares = sort_runs(loaded_pix, g.key[loaded], self.sort)
+        order = loaded[perm]                       # runs stay in place: loaded_pix is pix[order]
         struct = [Structure("stencil", STENCIL_BYTES, P * k, int(g.covered * k), "routing stencil per sample"),
                   Structure("samples", sb, P * k, len(kept_idx), f"depth + {self.colour_format} colour per sample")]
         over = g.count > k
-        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n, g.covered,
+        image = composite_stored(trace, pix, order, self.colour_format, loaded_pix)
+        return SchemeResult(self.name, self.params(), image, n, g.covered,
                             struct, plan, geometry_passes=2 if self.overflow_pass else 1,
                             dropped_fragments=int(n - len(kept_idx)), overflowed_pixels=int(over.sum()),
-                            lists=CapturedLists(pix[order], order),
+                            lists=CapturedLists(loaded_pix, order),
                             stats={"sort_compares": Stat(compares, "compares", f"{self.sort} sort compares"),
                                    "overflow_query": Stat(int((g.count - kept_n).sum()), "fragments",
                                                           "fragments the overflow pass's occlusion query counts")})

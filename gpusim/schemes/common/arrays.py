@@ -40,52 +40,54 @@ def lex_order(*keys: np.ndarray) -> np.ndarray:
     unordered input). Keys needing more bits than a word has beside the index are sorted
     least significant word first, each pass stable by the index it carries.
     """
+    return lex_sorted(*keys)[0]
+
+
+def lex_sorted(*keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``lex_order(*keys)`` and ``keys[0]`` in that order, read off the last sorted word (no
+    gather) when ``keys[0]`` fits in it whole."""
     n = len(keys[0])
     ib = _index_bits(n)
     room = 64 - ib
     words: list[tuple[np.ndarray, int]] = []     # (uint64 word, bits used), least significant first
-    for key in reversed(keys):
+    lead = None                                   # where keys[0] sits in the last word: (shift, lowest value)
+    for k, key in enumerate(reversed(keys)):
         if len(key) != n:
             raise ValueError("lex_order: keys differ in length")
         if n == 0:
             continue
-        field, _, width = _from_zero(key)
-        if width == 0:
-            continue                              # one value: orders nothing
+        field, lo, width = _from_zero(key)
+        if width == 0:                            # one value: orders nothing
+            lead = (None, lo) if k == len(keys) - 1 else lead
+            continue
         shift = 0
         while shift < width:
             bits = min(room, width - shift)
             piece = field >> np.uint64(shift) if shift else field
             if width - shift > bits:
                 piece = piece & np.uint64((1 << bits) - 1)
-            if words and words[-1][1] + bits <= room:
-                word, used = words[-1]
-                words[-1] = (word | (piece << np.uint64(used)), used + bits)
+            at = words[-1][1] if words and words[-1][1] + bits <= room else 0
+            if k == len(keys) - 1 and bits == width:
+                lead = (at, lo)
+            if at:
+                words[-1] = (words[-1][0] | (piece << np.uint64(at)), at + bits)
             else:
                 words.append((piece, bits))
             shift += bits
-    perm = None
+    perm, packed = None, None
     for word, _ in words:
-        perm, _ = _sort_word(word, ib, perm)
-    return np.arange(n, dtype=np.intp) if perm is None else perm
-
-
-def sorted_order(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``lex_order(values)`` and ``values`` in that order, read off the sorted word (no gather)
-    when one word holds them beside the index."""
-    values = np.asarray(values)
-    n = len(values)
-    if n and values.dtype.kind in "iu":
-        ib = _index_bits(n)
-        field, lo, width = _from_zero(values)
-        if 0 < width <= 64 - ib:
-            perm, packed = _sort_word(field, ib)
-            packed >>= np.uint64(ib)
-            if values.dtype.kind == "u":
-                return perm, (packed + np.uint64(lo)).astype(values.dtype)
-            return perm, (packed.view(np.int64) + np.int64(lo)).astype(values.dtype)
-    perm = lex_order(values)
-    return perm, values[perm]
+        perm, packed = _sort_word(word, ib, perm)
+    first = np.asarray(keys[0])
+    if perm is None:
+        return np.arange(n, dtype=np.intp), first.copy()
+    if lead is None:
+        return perm, first[perm]
+    if lead[0] is None:
+        return perm, np.full(n, lead[1], first.dtype)
+    packed >>= np.uint64(ib + lead[0])
+    if first.dtype.kind in "ub":
+        return perm, (packed + np.uint64(lead[1])).astype(first.dtype)
+    return perm, (packed.view(np.int64) + np.int64(lead[1])).astype(first.dtype)
 
 
 def _index_bits(n: int) -> int:
@@ -138,7 +140,7 @@ def rank_in_runs(pix_sorted: np.ndarray) -> np.ndarray:
 def unique_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``np.unique(values, return_index=True, return_inverse=True)`` for integers, sorted by
     :func:`lex_order`: the distinct values ascending, the first index of each, and each value's id."""
-    order, ordered = sorted_order(values)
+    order, ordered = lex_sorted(values)
     new = np.empty(len(values), bool)
     new[:1] = True
     np.not_equal(ordered[1:], ordered[:-1], out=new[1:])
@@ -149,28 +151,11 @@ def unique_ids(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def sort_within_runs(pix_sorted: np.ndarray, key: np.ndarray) -> np.ndarray:
     """Permutation sorting each run of a grouped ``pix_sorted`` by ``key`` (integers), ties in place
-    order, the runs staying where they are (``lex_order(pix_sorted, key)`` when they ascend).
-
-    The runs stay where they are, so one value sort does it: (run, key, rank in run) packed in
-    a uint64 (when they fit) holds a position without the index beside it.
-    """
-    n = len(pix_sorted)
-    if n == 0:
-        return np.zeros(0, np.intp)
-    field, _, key_bits = _from_zero(key)
+    order, the runs staying where they are (``lex_order(pix_sorted, key)`` when they ascend)."""
+    if len(pix_sorted) < 2 or bool((pix_sorted[1:] >= pix_sorted[:-1]).all()):
+        return lex_order(pix_sorted, key)
     start = run_starts(pix_sorted)
-    length = np.diff(np.r_[start, n])
-    rank_bits = int(length.max() - 1).bit_length()
-    run_bits = (len(start) - 1).bit_length()
-    run = np.repeat(np.arange(len(start), dtype=np.uint64), length)
-    if run_bits + key_bits + rank_bits > 64:
-        return lex_order(run, key)
-    rank = np.arange(n, dtype=np.uint64) - np.repeat(start.astype(np.uint64), length)
-    packed = (run << np.uint64(key_bits + rank_bits)) | (field << np.uint64(rank_bits)) | rank
-    packed.sort()
-    rank_mask = np.uint64((1 << rank_bits) - 1)
-    return (start[(packed >> np.uint64(key_bits + rank_bits)).astype(np.intp)]
-            + (packed & rank_mask).astype(np.intp))
+    return lex_order(np.repeat(np.arange(len(start)), np.diff(np.r_[start, len(pix_sorted)])), key)
 
 
 def reversed_runs(pix_sorted: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from gpusim.schemes.common.arrays import lex_order, pixel_key, rank_in_runs, sorted_order
+from gpusim.schemes.common.arrays import lex_sorted, pixel_key, rank_in_runs
 from gpusim.schemes.common.depthkey import depth_key
 from gpusim.schemes.common.storage import effective_alpha
 from gpusim.trace import FragmentTrace
@@ -60,40 +60,64 @@ class PixelGroups:
 
     @cached_property
     def _arrival(self) -> tuple[np.ndarray, np.ndarray]:
-        return sorted_order(self.pix)
+        return lex_sorted(self.pix)
 
     @cached_property
     def arrival(self) -> np.ndarray:
         """0-based arrival rank of each fragment at its pixel (the j-1 of 'j-th fragment')."""
         rank = np.empty(self.n, np.int64)
-        rank[self.by_arrival] = rank_in_runs(self.pix_by_arrival)
+        rank[self.by_arrival] = self.arrival_by_arrival
         return rank
+
+    @cached_property
+    def arrival_by_arrival(self) -> np.ndarray:
+        """``arrival[by_arrival]``: 0, 1, ... through each pixel's fragments."""
+        return rank_in_runs(self.pix_by_arrival)
+
+    def first_arrivals(self, limit: int) -> tuple[np.ndarray, np.ndarray]:
+        """Each pixel's first ``limit`` fragments, grouped by pixel in arrival order, and their pixel ids."""
+        first = self.arrival_by_arrival < limit
+        return self.by_arrival[first], self.pix_by_arrival[first]
 
     @cached_property
     def by_depth(self) -> np.ndarray:
         """Fragment indices grouped by pixel, nearest first, equal depths in submission order."""
-        return lex_order(self.pix, self.key)
+        return self._depth[0]
+
+    @cached_property
+    def pix_by_depth(self) -> np.ndarray:
+        """``pix[by_depth]``: the pixel ids ascending."""
+        return self._depth[1]
+
+    @cached_property
+    def key_by_depth(self) -> np.ndarray:
+        """``key[by_depth]``: each pixel's depth keys ascending."""
+        return self.key[self.by_depth]
+
+    @cached_property
+    def _depth(self) -> tuple[np.ndarray, np.ndarray]:
+        return lex_sorted(self.pix, self.key)
 
     @cached_property
     def distinct_rank(self) -> np.ndarray:
         """0-based rank of each fragment's depth among the distinct depths of its pixel."""
         rank = np.empty(self.n, np.int64)
-        rank[self.by_depth] = self._distinct_rank_by_depth
+        rank[self.by_depth] = self.distinct_rank_by_depth
         return rank
 
     @cached_property
-    def _distinct_rank_by_depth(self) -> np.ndarray:
-        order = self.by_depth
-        return distinct_rank_in_runs(self.pix[order], self.key[order])
+    def distinct_rank_by_depth(self) -> np.ndarray:
+        """``distinct_rank[by_depth]``."""
+        return distinct_rank_in_runs(self.pix_by_depth, self.key_by_depth)
 
     @cached_property
     def layers(self) -> np.ndarray:
         """Distinct depths of each pixel, (pixel_count,) int64."""
         lay = np.zeros(self.pixel_count, np.int64)
         if self.n:
-            pix_sorted = self.pix[self.by_depth]
+            pix_sorted = self.pix_by_depth
             last = np.r_[pix_sorted[1:] != pix_sorted[:-1], True]
-            lay[pix_sorted[last]] = self._distinct_rank_by_depth[last] + 1
+            lay[pix_sorted[last]] = self.distinct_rank_by_depth[last] + 1
         return lay
 
 

@@ -26,7 +26,7 @@ from typing import Literal
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.common.arrays import put_rows
+from gpusim.schemes.common.arrays import put_rows, sort_within_runs
 from gpusim.schemes.common.leading_zeros import colour_bits
 from gpusim.schemes.common.storage import DEPTH_BYTES
 
@@ -116,14 +116,16 @@ class StoredColours:
 def stored_colours(rgba: np.ndarray, bits: int, fragment_bits: int, lze: str) -> StoredColours:
     """Quantise to ``bits`` per channel, compress (gpusim.schemes.common.leading_zeros), return the blended values."""
     top = np.float32((1 << bits) - 1)
-    c = unorm(rgba[:, :3], bits)
-    a = unorm(rgba[:, 3], bits)
+    c = _unorm_steps(rgba[:, :3], bits)           # whole numbers: exact in float32 and int64 alike
+    a = _unorm_steps(rgba[:, 3], bits)
     alpha = a.astype(np.float32) / top
     if lze == "off":
-        weighted = (c.astype(np.float32) / top) * alpha[:, None]
+        weighted = c.astype(np.float32)
+        weighted /= top
+        weighted *= alpha[:, None]
         rgb_bits = np.full(len(c), 3 * bits, np.int64)
     else:
-        pm = premultiply(c, a, bits)
+        pm = premultiply(c.astype(np.int64), a.astype(np.int64), bits)
         weighted = pm.astype(np.float32) / top
         rgb_bits = colour_bits(pm, bits, lze)
     return StoredColours(weighted, alpha, fragment_bits - 3 * bits + rgb_bits)
@@ -137,8 +139,13 @@ def weighted_image(trace, g, visible: np.ndarray, stored: np.ndarray, colours: S
     """
     at = np.empty(len(trace), np.int64)            # each stored fragment's row in ``colours``
     at[stored] = np.arange(len(stored))
-    order = g.by_depth[visible[g.by_depth]]
+    # depth order: each pixel's visible fragments in arrival order, sorted in place (ties keep arrival)
+    in_arrival = visible[g.by_arrival]
+    arrived, pix = g.by_arrival[in_arrival], g.pix_by_arrival[in_arrival]
+    key = g.key[arrived]
+    nearest_first = sort_within_runs(pix, key)
+    order = arrived[nearest_first]
     rows = at[order]
-    image = composite_weighted(g.pix[order], g.key[order], np.take(colours.weighted, rows, axis=0),
+    image = composite_weighted(pix, key[nearest_first], np.take(colours.weighted, rows, axis=0),
                                colours.alpha[rows], base, ties)
     return image.reshape(trace.height, trace.width, 3), order
