@@ -26,9 +26,11 @@ exact reference": that holds per layer, not per pixel (40 layers of alpha 0.0019
 8 bits store as 0, are 18 steps off), so the per-layer bound above is what is tested.
 
 Schemes the docs call approximate (wboit: RGBA16F accumulation; alpha-blend:
-unsorted) are held to what they do promise: finite images, no dropped fragments,
-alpha-0 fragments ignored, and for wboit an order-independent result within the
-half-float rounding of its targets.
+unsorted; mlab: merges past its layers; mboit: moments) are held to what they do
+promise: finite images, no dropped fragments, alpha-0 fragments ignored, for wboit an
+order-independent result within the half-float rounding of its targets and for mlab
+within its layers; tests/test_mlab_mboit.py checks their images against the exact
+reference.
 """
 
 from __future__ import annotations
@@ -76,7 +78,9 @@ class Spec:
     "first" (the first ``limit`` to arrive at a pixel are kept), "nearest" (the ``limit``
     nearest of a pixel, whatever the interleaving), "pool" (the first ``limit`` x W x H
     fragments of the frame), "filter" (LucidRaster's ``limit``-entry depth filter: exact
-    while a pixel has at most ``limit`` samples), None. ``ties``: the order of equal depths
+    while a pixel has at most ``limit`` samples), "merge" (MLAB: nothing dropped, the
+    farthest entries merged past ``limit`` fragments of a pixel, so order-independent only
+    within it), None. ``ties``: the order of equal depths
     ("submission": earlier in front, as the reference; "reverse": later in front;
     "first-only": only the first submitted is kept; "last-colour": one entry per depth with
     the last submitted fragment's colour; "dual": dual depth peeling's front/back rule;
@@ -123,13 +127,19 @@ SPECS = {
     "weight-factor": Spec("unorm8", round_background=True, opaque_first=True),
     "r-buffer": Spec("unorm8", round_background=True, opaque_first=True, blend_rounding=True, ties="reverse"),
     "zbuffer": Spec("rgba8", exact=False, ties=None),
+    # MLAB: exact up to its rgba8 layers while a pixel has at most `layers` fragments, merges past them
+    "mlab": Spec("rgba8", capacity="merge", limit=_param("mlab", "layers"), exact=False),
+    # MBOIT: approximate at every depth complexity; its sums are rounded to half floats in submission order
+    "mboit": Spec(exact=False, ties=None),
 }
 EXACT = [n for n in ALL if SPECS[n].exact]
 #: renders every fragment opaque (alpha ignored, the nearest wins, the first submitted among equal depths):
 #: not a transparency scheme, so the order-independence and transparent-fragment properties do not apply
 OPAQUE_ONLY = {"zbuffer"}
 # alpha-blend blends in submission order by design
-ORDER_INDEPENDENT = [n for n in ALL if n != "alpha-blend" and n not in OPAQUE_ONLY]
+# mboit's half-float sums depend on the order they are added in, and its reconstruction amplifies that by up to
+# its moment matrix's condition number (no bound is documented): tests/test_mlab_mboit.py measures it
+ORDER_INDEPENDENT = [n for n in ALL if n not in ("alpha-blend", "mboit") and n not in OPAQUE_ONLY]
 LOSSY = [n for n in ALL if SPECS[n].capacity in ("first", "nearest", "pool", "bucket", "peel")]
 #: a fragment added to a pixel moves its depth range, and with it every bucket boundary: an alpha-0 fragment
 #: can part two colliding fragments or join two others
@@ -245,7 +255,7 @@ def capacity_kwargs(name, spare=0) -> dict:
     """Strategy arguments that keep a trace within ``name``'s documented capacity, with room for ``spare``
     more fragments at any pixel."""
     s = SPECS[name]
-    if s.capacity in ("first", "nearest", "filter"):
+    if s.capacity in ("first", "nearest", "filter", "merge"):
         return {"per_pixel": int(s.limit) - spare}
     if s.capacity == "pool":
         return {"pool_per_pixel": s.limit, "spare": spare}
@@ -548,7 +558,7 @@ def test_submission_order_does_not_change_the_image(name, data):
     # first-come capacities keep other fragments in another order, and past its capacity LucidRaster's
     # depth filter blends in arrival order (invalid pixels): stay within them. The k nearest are the k
     # nearest whatever the order.
-    kwargs = capacity_kwargs(name) if s.capacity in ("first", "pool", "filter") else {}
+    kwargs = capacity_kwargs(name) if s.capacity in ("first", "pool", "filter", "merge") else {}
     trace = data.draw(traces(distinct=True, **kwargs), label="trace")
     perm = data.draw(st.permutations(range(len(trace))), label="permutation")
     shuffled = rebuilt(trace, np.asarray(perm, np.int64))

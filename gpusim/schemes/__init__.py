@@ -6,7 +6,7 @@ gpusim.opplan for the operations a scheme reports.
 """
 
 from gpusim.schemes import (  # noqa: F401  (importing registers each scheme)
-    blending, bucket, depth_peeling, freepipe_abuffer, freepipe_mdts, kbuffer, linked_list, lucidraster,
+    blending, bucket, depth_peeling, freepipe_abuffer, freepipe_mdts, kbuffer, linked_list, lucidraster, mboit, mlab,
     multipass_kbuffer, rbuffer, srab, tfss, weight_factor, zbuffer)
 from gpusim.schemes.base import REGISTRY, Scheme, describe_scheme, make_scheme, scheme_class, scheme_names
 from gpusim.schemes.result import SchemeResult

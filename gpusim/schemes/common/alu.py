@@ -116,3 +116,55 @@ POPCOUNT_WORD = 3
 EQUALISE = 4
 #: the composite's test of one bucket for the empty value (a compare and the branch around its compositing)
 BUCKET_SCAN = 2
+
+#: an MLAB fragment's output (Salvi & Vaidyanathan 2014): its colour premultiplied by alpha (3 multiplies) and
+#: its transmittance 1 - a (1)
+MLAB_FRAGMENT = PREMULTIPLY + 1
+#: MLAB's merge of the two farthest of its layers + 1 entries: rgb + rgb' T (3 fmas), T T' (1), the test whether
+#: the last entry is occupied and a select of each of the 4 merged values
+MLAB_MERGE = 3 + 1 + 1 + 4
+
+#: moment-based OIT's pass 1 per fragment (Münstermann et al. 2018): alpha clamp (a min), 1 - a, the logarithm
+#: (log2 and a multiply) and the depth warp (an fma) = 5; then power moments: the powers z^2 .. z^m (m - 1
+#: multiplies) and A z^j (m); trigonometric: the phase (an fma), sin and cos (2), the complex powers
+#: e^(2 i phi) .. e^(m i phi) (m - 1 complex multiplies of 4) and A times 2m reals
+MBOIT_GENERATE = {"power4": 5 + 3 + 4, "power6": 5 + 5 + 6, "trig4": 5 + 1 + 2 + 3 * 4 + 8}
+#: the roots of the kernel polynomial: a quadratic in its stable form (the discriminant: a multiply, an fma, a
+#: clamp; its square root; the sign select (2); an add and a multiply; 2 divisions of 2); a cubic by Blinn's
+#: homogeneous method (B and C (2); the Hessian's 3 terms of 2; the discriminant (3) and its root; per end of
+#: the range: D-bar (3), atan2 (8), abs and / 3 (2), the scale's clamp, root and multiply (3), sin and cos (2),
+#: 2 roots (3), a select (2); the middle root (9); 3 divisions of 2); a complex quartic by Ferrari (monic form:
+#: a complex reciprocal (6) and 4 complex multiplies (16); the depressed coefficients (40); the resolvent by
+#: Cardano: a complex square root (8), a cube root in polar form (12), 3 candidate roots of a complex division
+#: (10), a size (3) and a select (2); 3 complex square roots (24) and the 4 roots (8))
+MBOIT_ROOTS = {3: 3 + 1 + 2 + 2 + 4, 4: 2 + 6 + 4 + 2 * 23 + 9 + 6, 5: 6 + 16 + 40 + 8 + 12 + 3 * 15 + 24 + 8}
+#: moment-based OIT's resolve per pixel: the total transmittance exp(-b_0) (a multiply and exp2), 1 - T, the
+#: reciprocal of the accumulated alpha and 3 multiplies of the accumulated colour by it and by 1 - T (6)
+MBOIT_RESOLVE = 2 + 1 + 1 + 6
+
+
+def mboit_reconstruct(kind: str, count: int) -> int:
+    """Instructions of moment-based OIT's transmittance at one fragment's depth from ``count`` moments of
+    ``kind`` ("power" or "trigonometric"; gpusim.schemes.common.moments), on a k x k moment matrix (Hankel:
+    k = count / 2 + 1, real; Toeplitz: k = count + 1, complex, where an fma costs 4):
+
+    * normalise and bias the moments: a reciprocal of b_0, a multiply and an fma per real;
+    * the L D L^H factorisation: an fma per product of its sums, a multiply per entry of L, a reciprocal per
+      pivot;
+    * the kernel polynomial (B c = u(x_0)): forward and backward substitution, k^2 fmas, and the powers of
+      x_0 (k - 1 multiplies);
+    * its roots (``MBOIT_ROOTS``);
+    * a Christoffel weight per support point (k of them): the powers of the point, a forward substitution,
+      k squared sizes over D (an fma each) and a reciprocal; trigonometric moments also take each point's
+      angle (atan2, 8) to compare;
+    * per root a compare and a select-add (trigonometric: also the wrapping zone's ramp, an fma, a clamp and a
+      max); then b_0 times the share, exp2 and saturate (4)."""
+    complex_ = kind == "trigonometric"
+    k = count // 2 + 1 if not complex_ else count + 1
+    op = 4 if complex_ else 1
+    reals = count * (2 if complex_ else 1)
+    normalise = 1 + 2 * reals
+    ldl = op * (sum(j for j in range(k)) + sum((k - 1 - j) * (j + 1) for j in range(k))) + k
+    kernel = op * (k * k + k - 1)
+    weight = op * ((k - 1) + k * (k - 1) // 2) + 2 * k + 1 + (8 if complex_ else 0)
+    return normalise + ldl + kernel + MBOIT_ROOTS[k] + k * weight + (5 if complex_ else 2) * (k - 1) + 4

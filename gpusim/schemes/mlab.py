@@ -1,0 +1,153 @@
+"""Multi-layer alpha blending (Salvi & Vaidyanathan, I3D 2014), approximate past ``layers`` fragments.
+
+Each pixel keeps an array of ``layers`` entries (depth, premultiplied colour, transmittance), nearest first,
+cleared to (empty, black, 1). Every fragment, in submission order under pixel synchronisation, reads its
+pixel's entries, inserts (z, a c, 1 - a) at its depth (behind stored entries of equal depth: the first
+submitted stays nearer), and when that leaves ``layers`` + 1 occupied entries merges the two farthest, the
+paper's merge: the nearer keeps its depth, its colour becomes rgb + rgb' T and its transmittance T T'.
+The resolve composites the entries front to back over the background:
+C = sum_i (prod_(j<i) T_j) rgb_i + (prod T_j) background. With at most ``layers`` fragments at a pixel
+nothing merges and the image is the sorted composite (the exact reference, up to the storage format).
+A fragment of alpha 0 is discarded by its shader (it would take an entry and force a merge while adding
+nothing).
+
+Storage (``colour_format``): the paper's layer is a 32-bit float depth and an RGBA8 word holding the
+premultiplied colour and the transmittance (8 bytes; 2 layers 16 bytes per pixel, 4 layers 32): a
+premultiplied colour and a transmittance are in [0, 1], so unorm8 holds them, and every value written (an
+inserted fragment, a merge) is rounded to the format. ``rgba16f`` and ``rgba32f`` are wider alternatives.
+
+Ordering (``hw``): the read-modify-write of a pixel's entries is ordered, never a hazard. ``blender``
+models it as the ROP's programmable blender (``program_blend``: the fragment's insertion and merge run at
+the ROP on the ``layers`` entries, committed in submission order, as the k-buffer's proposal 2); ``rov``
+as a rasterizer-ordered view on the SM (Intel's PixelSync, the paper's platform): the pixel's interlock
+(the ``scoreboard`` operation holds a fragment while another of its pixel is in flight), then ``layers``
+reads, the insertion and merge on the SM, and ``layers`` writes.
+
+ALU work (gpusim.schemes.common.alu): the fragment's premultiplied outputs (``MLAB_FRAGMENT``); with
+``rov`` also the insertion (``layers`` compare-exchanges of an entry) and the merge (``MLAB_MERGE``) on the
+SM; the resolve composites the occupied entries (``COMPOSITE`` each).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from gpusim.config import param
+from gpusim.opplan import OpPlan, Pass
+from gpusim.schemes.base import Scheme, register
+from gpusim.schemes.common.alu import COMPOSITE, MLAB_FRAGMENT, MLAB_MERGE, compare_exchange
+from gpusim.schemes.common.arrays import entry_index
+from gpusim.schemes.common.fold import fold
+from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, rounder
+from gpusim.schemes.result import SchemeResult, Stat, Structure
+
+EMPTY = float(0xFFFFFFFF)    # depth key of an empty entry (behind every depth in [0, 1])
+
+
+def insert_and_merge(keys: np.ndarray, values: np.ndarray, key: np.ndarray, value: np.ndarray,
+                     rnd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One MLAB step on m pixels: entries ``keys`` (m, L) ascending (``EMPTY`` last) and ``values`` (m, L, 4)
+    (premultiplied rgb, transmittance; float32) take the fragment (``key`` (m,), ``value`` (m, 4)) behind their
+    entries of equal depth; where L + 1 entries are then occupied the two farthest merge. Returns the new
+    (keys, values) and whether each pixel merged."""
+    m, L = keys.shape
+    pos = (keys <= key[:, None]).sum(axis=1)                      # entries at or in front of the fragment
+    slot = np.arange(L + 1)[None, :]
+    src = np.where(slot < pos[:, None], slot, slot - 1)           # which old entry lands in each slot
+    rows = np.arange(m)[:, None]
+    ext_k = np.where(slot == pos[:, None], key[:, None], keys[rows, np.clip(src, 0, L - 1)])
+    ext_v = np.where((slot == pos[:, None])[..., None], value[:, None, :], values[rows, np.clip(src, 0, L - 1)])
+    merged = ext_k[:, L] != EMPTY
+    near, far = ext_v[:, L - 1], ext_v[:, L]
+    mix = np.empty_like(near)
+    mix[:, :3] = rnd(near[:, :3] + far[:, :3] * near[:, 3:4])
+    mix[:, 3] = rnd(near[:, 3] * far[:, 3])
+    ext_v[:, L - 1] = np.where(merged[:, None], mix, near)
+    return ext_k[:, :L], ext_v[:, :L], merged
+
+
+def resolve_layers(values: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """Front-to-back composite of each pixel's entries (P, L, 4) over ``background`` (3,), float32: (P, 3)."""
+    colour = np.zeros((len(values), 3), np.float32)
+    trans = np.ones(len(values), np.float32)
+    for j in range(values.shape[1]):
+        colour += trans[:, None] * values[:, j, :3]
+        trans *= values[:, j, 3]
+    return colour + trans[:, None] * np.asarray(background, np.float32)
+
+
+@register("mlab")
+@dataclass(frozen=True)
+class MultiLayerAlphaBlending(Scheme):
+    summary = "multi-layer alpha blending (Salvi & Vaidyanathan 2014): per-pixel layers, merge on overflow"
+
+    layers: int = param(4, unit="entries/pixel", doc="blending layers per pixel (the paper: 2 or 4)", min=1, max=64)
+    colour_format: ColourFormat = param("rgba8", doc="a layer's premultiplied colour and transmittance (the "
+                                        "paper's RGBA8, beside a 32-bit depth)")
+    hw: Literal["blender", "rov"] = param("blender", doc="the ordered read-modify-write: the ROP's programmable "
+                                          "blender, or a rasterizer-ordered view (interlock) on the SM")
+
+    def simulate(self, trace) -> SchemeResult:
+        g = PixelGroups(trace)
+        n, P, pix, L = len(trace), trace.pixel_count, g.pix, self.layers
+        cb = COLOUR_BYTES[self.colour_format]
+        entry = DEPTH_BYTES + cb
+        rnd = rounder(self.colour_format)
+        kept = g.alpha > 0                          # alpha 0: the shader discards it
+        frags = np.flatnonzero(kept)
+        count = np.bincount(pix[frags], minlength=P)
+        occupied = np.minimum(count, L)
+
+        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
+                  Pass("resolve", "fullscreen", "pixel")]
+        plan = OpPlan(passes, ["layers"])
+        plan.add(0, "store", "layers", P * L, 1, lambda i, s: i * entry, entry)
+        plan.compute(1, frags, MLAB_FRAGMENT, dep=False)
+        if self.hw == "blender":
+            plan.add(1, "program_blend", "layers", frags, 1, lambda i, s: pix[frags[i]] * entry, L * entry)
+        else:
+            at = lambda i, s: entry_index(pix[frags[i]], s, L, P, "layer-major") * entry  # noqa: E731
+            plan.add(1, "scoreboard", "layers", frags, 1, lambda i, s: pix[frags[i]] * entry, 0)
+            plan.add(1, "rmw_read", "layers", frags, L, at, entry, dep=True)
+            plan.compute(1, frags, L * compare_exchange(cb) + MLAB_MERGE)
+            plan.add(1, "rmw_write", "layers", frags, L, at, entry, dep=True)
+        pixels = P
+        plan.add(2, "load", "layers", pixels, L, lambda i, s: entry_index(i, s, L, P, "layer-major") * entry, entry)
+        plan.compute(2, pixels, occupied * COMPOSITE)
+
+        a = g.alpha[frags]
+        value = np.empty((len(frags), 4), np.float32)
+        value[:, :3] = rnd(trace.rgba[frags, :3] * a[:, None])
+        value[:, 3] = rnd(np.float32(1.0) - a)
+        key = g.key[frags].astype(np.float64)
+        order = np.flatnonzero(kept[g.by_arrival])          # positions of kept fragments in arrival order
+        arrival = g.by_arrival[order]
+        at_frag = np.empty(n, np.int64)
+        at_frag[frags] = np.arange(len(frags))
+        value, key = value[at_frag[arrival]], key[at_frag[arrival]]   # in arrival order
+        state = np.zeros((P, L, 6), np.float64)             # key, rgb, T, merged
+        state[:, :, 0] = EMPTY
+        state[:, :, 4] = 1.0
+
+        def step(s, i):
+            k, v, merged = insert_and_merge(s[:, :, 0], s[:, :, 1:5].astype(np.float32), key[i], value[i], rnd)
+            out = np.empty_like(s)
+            out[:, :, 0], out[:, :, 1:5] = k, v
+            out[:, :, 5] = s[:, :, 5] + merged[:, None]
+            return out
+
+        state = fold(pix, arrival, state, step)
+        # the resolve's output saturates to [0, 1] (rounded premultiplied colours and transmittances can sum past 1)
+        image = np.clip(resolve_layers(state[:, :, 1:5].astype(np.float32), trace.background), 0.0, 1.0)
+        merges = state[:, 0, 5].astype(np.int64)
+        struct = [Structure("layers", entry, P * L, int(occupied.sum()), f"{L} layers of 32-bit depth + "
+                            f"{self.colour_format} premultiplied colour and transmittance")]
+        stats = {"merges": Stat(int(merges.sum()), "fragments", "insertions that merged the two farthest entries"),
+                 "merged_pixels": Stat(int(np.count_nonzero(merges)), "pixels", "pixels where entries merged"),
+                 "discarded_fragments": Stat(int(n - len(frags)), "fragments", "fragments of alpha 0 discarded")}
+        return SchemeResult(self.name, self.params(), image.reshape(trace.height, trace.width, 3), n, g.covered,
+                            struct, plan, geometry_passes=1, dropped_fragments=0, overflowed_pixels=0, stats=stats)
