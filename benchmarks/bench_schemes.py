@@ -1,6 +1,6 @@
 """Scheme functional-model throughput: fragments per second, per scheme, in coherent and in random order.
 
-    .venv/bin/python benchmarks/bench_schemes.py [--size 1024x768] [--repeat 2] [--seed 0] [--scheme NAME ...]
+    .venv/bin/python benchmarks/bench_schemes.py [--size 1024x768] [--repeat 3] [--seed 0] [--scheme NAME ...]
 
 The workload is the built-in ``default`` scene at SIZE with the camera's vertical field of
 view narrowed to 32 degrees (1024x768: 3,216,800 fragments, depth complexity up to 13),
@@ -12,8 +12,9 @@ order at most 1.5x coherent order's time. Two baselines are measured in the same
 random-order trace: the exact reference compositor (one stable sort and a front-to-back
 composite), and one numpy stable argsort of the packed (pixel, depth) keys, the floor no
 exact sorted scheme beats; each scheme's random-order time is printed as a ratio against both.
-Times are the process's CPU seconds, the best of --repeat runs: the models run on one thread,
-so on an idle machine that is their wall time, and on a shared one it is steadier.
+Times are the process's CPU seconds, the best of --repeat rounds that alternate between the
+two orders: the models run on one thread, so on an idle machine that is their wall time, and
+on a shared one it is steadier.
 """
 
 from __future__ import annotations
@@ -41,12 +42,15 @@ VARIANTS = [("freepipe-mdts", {"packing": True, "alpha": 0.5}), ("kbuffer", {"mo
             ("lucidraster", {"depth_filter": 12}), ("lucidraster", {"alpha_threshold": True})]
 
 
-def best_of(fn, repeat):
-    best = float("inf")
+def best_of(repeat, *fns):
+    """The least CPU seconds of each of ``fns`` over ``repeat`` rounds (the rounds alternate between them, so a
+    change in the machine's load falls on each alike)."""
+    best = [float("inf")] * len(fns)
     for _ in range(repeat):
-        start = time.process_time()
-        fn()
-        best = min(best, time.process_time() - start)
+        for i, fn in enumerate(fns):
+            start = time.process_time()
+            fn()
+            best[i] = min(best[i], time.process_time() - start)
     return best
 
 
@@ -61,7 +65,7 @@ def screen_size(text: str) -> tuple[int, int]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=screen_size, default=(1024, 768), help="screen WIDTHxHEIGHT in pixels")
-    ap.add_argument("--repeat", type=int, default=2, help="runs per scheme and order (best is kept)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per scheme and order (best is kept)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the random fragment order")
     ap.add_argument("--scheme", action="append", help="only this scheme and its variants (repeatable)")
     args = ap.parse_args(argv)
@@ -74,8 +78,7 @@ def main(argv=None) -> int:
     print(f"trace: default scene (fov_y {FOV_Y_DEG:g} deg) at {width}x{height}, {n:,} fragments, "
           f"max depth complexity {int(coherent.depth_complexity().max())}; random order: seed {args.seed}")
     keys = pixel_key(shuffled.pixel_ids(), depth_key(shuffled.z))
-    floor = best_of(lambda: np.argsort(keys, kind="stable"), args.repeat)
-    reference = best_of(lambda: composite_exact(shuffled), args.repeat)
+    floor, reference = best_of(args.repeat, lambda: np.argsort(keys, kind="stable"), lambda: composite_exact(shuffled))
     print(f"baselines on the random order: numpy argsort of the (pixel, depth) keys {floor:.3f} s "
           f"({n / floor / 1e6:.2f} M/s); exact reference compositor {reference:.3f} s ({n / reference / 1e6:.2f} M/s)")
     print(f"{'scheme':<52}{'coherent':>9}{'random':>8}{'slowdown':>9}{'x sort':>8}{'x ref':>7}"
@@ -87,8 +90,7 @@ def main(argv=None) -> int:
             continue
         model = make_scheme(name, params)
         label = name + "".join(f" {k}={v}" for k, v in params.items())
-        t_coherent = best_of(lambda: model.run(coherent), args.repeat)
-        t_random = best_of(lambda: model.run(shuffled), args.repeat)
+        t_coherent, t_random = best_of(args.repeat, lambda: model.run(coherent), lambda: model.run(shuffled))
         fast, steady = n / t_random >= TARGET, t_random <= SLOWDOWN * t_coherent
         failed += [] if fast and steady else [label]
         print(f"{label:<52}{n / t_coherent / 1e6:>9.2f}{n / t_random / 1e6:>8.2f}{t_random / t_coherent:>9.2f}"

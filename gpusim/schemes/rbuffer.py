@@ -45,7 +45,7 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import RECIRCULATE_TEST
-from gpusim.schemes.common.arrays import lex_order, reversed_runs
+from gpusim.schemes.common.arrays import lex_sorted, reversed_runs
 from gpusim.schemes.common.early_z import early_z, pipeline_buffers, pipeline_structures, storage_bytes
 from gpusim.schemes.common.fold import fold
 from gpusim.schemes.common.groups import PixelGroups, distinct_rank_in_runs
@@ -56,9 +56,10 @@ from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 def far_rank(pix: np.ndarray, key: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For fragments ``idx``: how many distinct depths of their pixel (among ``idx``) lie behind them; and
     the order of ``idx`` grouped by pixel, farthest first (equal depths in ``idx`` order)."""
-    order = lex_order(pix[idx], ~key[idx])
+    key = key[idx]
+    order, pix_sorted = lex_sorted(pix[idx], ~key)
     rank = np.empty(len(idx), np.int64)
-    rank[order] = distinct_rank_in_runs(pix[idx][order], key[idx][order])
+    rank[order] = distinct_rank_in_runs(pix_sorted, key[order])
     return rank, order
 
 
@@ -136,8 +137,9 @@ class RBuffer(Scheme):
         rgba = rnd(np.take(trace.rgba, blend_order, axis=0))     # in blending order
 
         def step(state, i):
-            a = rgba[i, 3:4]
-            return rnd(a * rgba[i, :3] + (1 - a) * state)
+            rows = np.take(rgba, i, axis=0)
+            a = rows[:, 3:4]
+            return rnd(a * rows[:, :3] + (1 - a) * state)
 
         image = fold(pix, blend_order, ez.opaque_rgb.copy(), step).reshape(trace.height, trace.width, 3)
         same = np.r_[False, (pix[blend_order][1:] == pix[blend_order][:-1])
