@@ -48,7 +48,7 @@ from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.common.alu import COMPOSITE, DUAL_PEEL_TEST, PEEL_TEST
-from gpusim.schemes.common.arrays import lex_order
+from gpusim.schemes.common.arrays import reversed_runs
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
@@ -167,17 +167,21 @@ class DualDepthPeeling(Scheme):
         plan.compute(final, pixels, COMPOSITE)      # the back accumulation behind the front one
 
         # composite order: front layers by depth (ties: submission), then back layers by depth
-        # with ties reversed (back-to-front 'over' blending makes the later one nearer)
-        idx = np.flatnonzero(peeled)
-        is_back = ~front[idx]
-        tiebreak = np.where(is_back, -idx, idx)
-        order = idx[lex_order(pix[idx], g.key[idx], tiebreak)]
+        # with ties reversed (back-to-front 'over' blending makes the later one nearer); read off
+        # the depth order, where a tie group (one pixel, one depth) is all front or all back
+        ps, ks, ds = g.pix_by_depth, g.key_by_depth, g.distinct_rank_by_depth
+        es = lay[ps] - 1 - ds
+        sel = np.minimum(ds, es) < peels
+        ps, ks, back = ps[sel], ks[sel], (ds > es)[sel]
+        tie_group = np.cumsum(np.r_[True, (ps[1:] != ps[:-1]) | (ks[1:] != ks[:-1])][:len(ps)])
+        order = g.by_depth[sel][np.where(back, reversed_runs(tie_group), np.arange(len(ps)))]
         struct = [Structure("minmax_depth", mm, 2 * P, 2 * g.covered, "two ping-pong RG32F (-min, max) textures"),
                   Structure("front_colour", cb, P, g.covered, "front-to-back accumulated colour"),
                   Structure("back_colour", cb, P, g.covered, "back-to-front accumulated colour")]
-        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, self.colour_format), n, g.covered,
+        image = composite_stored(trace, pix, order, self.colour_format, ps)
+        return SchemeResult(self.name, self.params(), image, n, g.covered,
                             struct, plan, geometry_passes=1 + peels, dropped_fragments=int(n - len(order)),
                             overflowed_pixels=int(np.count_nonzero(-(-lay // 2) > peels)),
-                            lists=CapturedLists(pix[order], order),
+                            lists=CapturedLists(ps, order),
                             stats={"layers": Stat(int(lay.max(initial=0)), "layers",
                                                   "largest number of distinct depths of a pixel")})

@@ -152,7 +152,8 @@ class LucidRaster(Scheme):
         ep, ek = pix[emitted], g.key[emitted]
         descent = np.zeros(len(ep), bool)
         descent[1:] = (ep[1:] == ep[:-1]) & (ek[1:] < ek[:-1])
-        invalid_pixels = int(len(np.unique(ep[descent])))
+        invalid = ep[descent]                     # pixels ascending
+        invalid_pixels = int(len(invalid) and 1 + np.count_nonzero(invalid[1:] != invalid[:-1]))
 
         rgb = np.take(trace.rgba[:, :3], emitted, axis=0)
         image = composite_runs(ep, rgb, g.alpha[emitted], P, trace.background,
@@ -171,7 +172,8 @@ class LucidRaster(Scheme):
                   "tb": np.bincount(grid.bin_of_block(tb_block), minlength=B),
                   "thb_bin": grid.bin_of_half_block(thb_region), "thb_tri": thb_tri,
                   "covered": np.flatnonzero(g.count), "block_tris": block_tris, "thb_region": thb_region,
-                  "shaded": np.bincount(grid.bin_of_pixel(pix[~skipped]), minlength=B)}
+                  "shaded": self._per_bin(grid, g.count if not skipped.any()
+                                          else np.bincount(pix[~skipped], minlength=P))}
         plan, struct, overflow = self._plan(trace, grid, tri, tris, pb_bin, pb_tri, bin_tris, counts, high | promoted)
         covered_bins = int(np.count_nonzero(bin_tris))
         stats = {
@@ -193,9 +195,17 @@ class LucidRaster(Scheme):
         }
         return SchemeResult(
             self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
-            dropped_fragments=int(skipped.sum()), overflowed_pixels=len(np.unique(pix[skipped])),
+            dropped_fragments=int(skipped.sum()),
+            overflowed_pixels=int(np.count_nonzero(np.bincount(pix[skipped], minlength=P))),
             lists=CapturedLists(ep, emitted),
             stats=stats)
+
+    @staticmethod
+    def _per_bin(grid, per_pixel: np.ndarray) -> np.ndarray:
+        """Sum of a per-pixel count over each bin (int64)."""
+        weights = per_pixel.astype(np.float64)     # exact: counts far below 2**53
+        return np.bincount(grid.bin_of_pixel(np.arange(len(per_pixel))), weights=weights,
+                           minlength=grid.bins).astype(np.int64)
 
     def _threshold_skips(self, trace, g, grid, half_block, frag_rank, by_arrival, emitted, steps) -> np.ndarray:
         """Samples never shaded because their half-block reached the alpha threshold first."""
