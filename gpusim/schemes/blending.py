@@ -90,6 +90,38 @@ def depth_tested_pass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colo
     return colour, transparent, culled
 
 
+def opaque_prepass(trace, g: PixelGroups, plan: OpPlan, prepass: bool,
+                   transparent_passes) -> tuple[np.ndarray, np.ndarray, int]:
+    """The opaque pre-pass as pass 0 (when ``prepass``: an rgba8 framebuffer) and the depth test of the
+    transparent fragments in each of ``transparent_passes``: (the colour behind the transparent fragments
+    (P, 3), the opaque image or the background; the mask of fragments to blend; transparent fragments culled)."""
+    if not prepass:
+        base = np.empty((trace.pixel_count, 3), np.float32)
+        base[:] = trace.background.astype(np.float32)
+        return base, np.ones(len(trace), bool), 0
+    base, blended, culled = depth_tested_pass(trace, g, plan, 0, 4, rounder("rgba8"))
+    t_idx, pix = np.flatnonzero(~trace.opaque), g.pix
+    for p in transparent_passes:
+        plan.add(p, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
+    return base, blended, culled
+
+
+def composite_over(plan: OpPlan, pass_index: int, pixels: int, instructions: int, prepass: bool) -> None:
+    """A full-screen resolve's work per pixel: its ``instructions``, then over the background itself
+    (``COMPOSITE``) or, after an opaque pre-pass, through the framebuffer's ``blend``."""
+    plan.compute(pass_index, pixels, instructions + (0 if prepass else COMPOSITE))
+    if prepass:
+        plan.add(pass_index, "blend", "framebuffer", pixels, 1, lambda i, s: i * 4, 4, dep=True)
+
+
+def prepass_structures(trace, pix: np.ndarray) -> list[Structure]:
+    """The opaque pre-pass's depth buffer and rgba8 framebuffer, used where an opaque fragment lands."""
+    P = trace.pixel_count
+    opaque_px = int(np.count_nonzero(np.bincount(pix[trace.opaque], minlength=P)))
+    return [Structure("depth_buffer", DEPTH_BYTES, P, opaque_px, "opaque depth (pre-pass)"),
+            Structure("framebuffer", 4, P, opaque_px, "rgba8 opaque colour")]
+
+
 @register("alpha-blend")
 @dataclass(frozen=True)
 class AlphaBlend(Scheme):
@@ -193,15 +225,8 @@ class WeightedBlendedOIT(Scheme):
         passes = ([Pass("opaque", "geometry", "fragment")] if prepass else []) + \
             [Pass("transparent", "geometry", "fragment"), Pass("composite", "fullscreen", "pixel")]
         plan = OpPlan(passes, (["depth_buffer", "framebuffer"] if prepass else []) + ["accumulation", "revealage"])
-        if prepass:
-            base, blended, culled = depth_tested_pass(trace, g, plan, 0, 4, rounder("rgba8"))
-            t_idx = np.flatnonzero(~trace.opaque)
-            plan.add(1, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES, DEPTH_BYTES)
-        else:
-            base = np.empty((P, 3), np.float32)
-            base[:] = trace.background.astype(np.float32)
-            blended, culled = np.ones(n, bool), 0
         tp = len(passes) - 2
+        base, blended, culled = opaque_prepass(trace, g, plan, prepass, (tp,))
         b_idx = np.flatnonzero(blended)
         # the weight w(z, a) and the premultiplied outputs (c a w, a w); the revealage output is a
         plan.compute(tp, b_idx, WBOIT_WEIGHT[self.weight] + PREMULTIPLY, dep=prepass)
@@ -211,9 +236,7 @@ class WeightedBlendedOIT(Scheme):
         plan.add(tp + 1, "load", "accumulation", pixels, 1, lambda i, s: i * ab, ab)
         plan.add(tp + 1, "load", "revealage", pixels, 1, lambda i, s: i * rb, rb)
         # accum.rgb / clamp(accum.a) and 1 - revealage; over the background here, or by the framebuffer's blend
-        plan.compute(tp + 1, pixels, WBOIT_RESOLVE + (0 if prepass else COMPOSITE))
-        if prepass:
-            plan.add(tp + 1, "blend", "framebuffer", pixels, 1, lambda i, s: i * 4, 4, dep=True)
+        composite_over(plan, tp + 1, pixels, WBOIT_RESOLVE, prepass)
 
         alpha = g.alpha
         w = self.weights(trace, alpha)
@@ -243,9 +266,7 @@ class WeightedBlendedOIT(Scheme):
         struct = [Structure("accumulation", ab, P, g.covered, f"{self.accum_format} sum of w*a*c and w*a"),
                   Structure("revealage", rb, P, g.covered, f"{self.revealage_format} product of (1 - a)")]
         if prepass:
-            opaque_px = int(np.count_nonzero(np.bincount(pix[trace.opaque], minlength=P)))
-            struct[:0] = [Structure("depth_buffer", DEPTH_BYTES, P, opaque_px, "opaque depth (pre-pass)"),
-                          Structure("framebuffer", 4, P, opaque_px, "rgba8 opaque colour")]
+            struct[:0] = prepass_structures(trace, pix)
         return SchemeResult(self.name, self.params(), image.reshape(trace.height, trace.width, 3), n, g.covered,
                             struct, plan, geometry_passes=1, dropped_fragments=0, overflowed_pixels=0,
                             stats={"culled_fragments": Stat(culled, "fragments",

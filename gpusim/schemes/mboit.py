@@ -48,12 +48,12 @@ import numpy as np
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
-from gpusim.schemes.blending import OpaqueMode, depth_tested_pass
-from gpusim.schemes.common.alu import COMPOSITE, MBOIT_GENERATE, MBOIT_RESOLVE, PREMULTIPLY, mboit_reconstruct
+from gpusim.schemes.blending import OpaqueMode, composite_over, opaque_prepass, prepass_structures
+from gpusim.schemes.common.alu import MBOIT_GENERATE, MBOIT_RESOLVE, PREMULTIPLY, mboit_reconstruct
 from gpusim.schemes.common.fold import fold
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.moments import CONFIGS, absorbance, moment_terms, transmittance, warp_depth
-from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, rounder
+from gpusim.schemes.common.storage import COLOUR_BYTES, rounder
 from gpusim.schemes.result import SchemeResult, Stat, Structure
 
 #: per precision: (bytes, render-target format) of b_0 and of each higher moment
@@ -103,16 +103,7 @@ class MomentBasedOIT(Scheme):
         plan = OpPlan(passes, (["depth_buffer", "framebuffer"] if prepass else []) +
                       ["zeroth_moment", "moments", "accumulation"])
         p1 = len(passes) - 3
-        if prepass:
-            base, blended, culled = depth_tested_pass(trace, g, plan, 0, 4, rounder("rgba8"))
-            t_idx = np.flatnonzero(~trace.opaque)
-            for p in (p1, p1 + 1):
-                plan.add(p, "depth_test", "depth_buffer", t_idx, 1, lambda i, s: pix[t_idx[i]] * DEPTH_BYTES,
-                         DEPTH_BYTES)
-        else:
-            base = np.empty((P, 3), np.float32)
-            base[:] = trace.background.astype(np.float32)
-            blended, culled = np.ones(n, bool), 0
+        base, blended, culled = opaque_prepass(trace, g, plan, prepass, (p1, p1 + 1))
         frags = np.flatnonzero(blended)
         at_target = lambda i, s: plane[s] + pix[frags[i]] * tb[s]  # noqa: E731
         at_zeroth = lambda i, s: pix[frags[i]] * zb  # noqa: E731
@@ -127,9 +118,7 @@ class MomentBasedOIT(Scheme):
         plan.add(p1 + 2, "load", "accumulation", pixels, 1, lambda i, s: i * ab, ab)
         plan.add(p1 + 2, "load", "zeroth_moment", pixels, 1, lambda i, s: i * zb, zb)
         # normalise and weigh by 1 - exp(-b_0); over the background here, or by the framebuffer's blend
-        plan.compute(p1 + 2, pixels, MBOIT_RESOLVE + (0 if prepass else COMPOSITE))
-        if prepass:
-            plan.add(p1 + 2, "blend", "framebuffer", pixels, 1, lambda i, s: i * 4, 4, dep=True)
+        composite_over(plan, p1 + 2, pixels, MBOIT_RESOLVE, prepass)
 
         order = g.by_arrival[blended[g.by_arrival]]
         zw = warp_depth(trace.z)
@@ -169,9 +158,7 @@ class MomentBasedOIT(Scheme):
                             "target(s)"),
                   Structure("accumulation", ab, P, lit, f"{self.accum_format} sum of T a c and T a")]
         if prepass:
-            opaque_px = int(np.count_nonzero(np.bincount(pix[trace.opaque], minlength=P)))
-            struct[:0] = [Structure("depth_buffer", DEPTH_BYTES, P, opaque_px, "opaque depth (pre-pass)"),
-                          Structure("framebuffer", 4, P, opaque_px, "rgba8 opaque colour")]
+            struct[:0] = prepass_structures(trace, pix)
         stats = {
             "moment_bits": Stat(8 * (zb + vb * ms.reals), "bits/pixel", "bits of b_0 and the moments per pixel"),
             "invalid_reconstructions": Stat(int(np.count_nonzero(invalid)), "fragments",
