@@ -55,7 +55,7 @@ from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_image, register
 from gpusim.schemes.common.alu import COMPOSITE, PACK_DEPTH_COLOUR, UNPACK_RGBA8, UNPACK_SPLIT_RGB24
-from gpusim.schemes.common.arrays import (Layout, count_before_in_pixel, entry_index, rank_in_runs,
+from gpusim.schemes.common.arrays import (Layout, count_before_in_pixel, entry_index, put_rows, rank_in_runs,
                                           reversed_runs, smallest_per_pixel)
 from gpusim.schemes.common.depthkey import EMPTY, colour24, colour24_rgb, packed_depth
 from gpusim.schemes.common.groups import PixelGroups, distinct_ids
@@ -117,9 +117,11 @@ class FreePipeMDTS(Scheme):
             storable = value != empty
             sort_value = value if self.direction == "min" else np.uint32(0xFFFFFFFF) - value
             every = bool(storable.all())
-            by_key = every and not self.packing and self.direction == "min"    # sort_value is the depth key
-            kept[name] = smallest_per_pixel(pix, sort_value, L, None if every else np.flatnonzero(storable),
-                                            g.by_depth if by_key else None)
+            nearest = every and not self.packing and self.direction == "min"    # sort_value is the depth key
+            if nearest:
+                kept[name] = g.by_depth[g.rank_by_depth < L]                   # each pixel's nearest L
+            else:
+                kept[name] = smallest_per_pixel(pix, sort_value, L, None if every else np.flatnonzero(storable))
             # a chain ends at the first empty entry: one atomic per entry filled before it + 1, at most L
             before = g.arrival if every else count_before_in_pixel(pix, g.by_arrival, storable)
             filled_before = np.minimum(before, L)
@@ -137,7 +139,7 @@ class FreePipeMDTS(Scheme):
             order, rgba = kd, store_colour(trace.rgba[kd], self.colour_format)
             rgba[trace.opaque[kd], 3] = 1.0
         else:
-            order, rgba, stats = self._colour_pass(trace, g, plan, kd)
+            order, rgba, stats = self._colour_pass(trace, g, plan, kd, nearest)
         res = lambda i, s: entry_index(i, s, L, P, layout)  # noqa: E731
         sentinel = kept_n + (kept_n < L)          # the load that finds the first empty entry ends the walk
         pixels = P
@@ -152,7 +154,8 @@ class FreePipeMDTS(Scheme):
 
         if self.direction == "max":      # entries descend: the resolve reads them back to front
             order, rgba = self._reverse_runs(pix, order, rgba)
-        image = composite_image(trace, pix[order], rgba, rgba[:, 3])
+        order_pix = pix[order]
+        image = composite_image(trace, order_pix, rgba, rgba[:, 3])
         struct = [Structure("depth_array", DEPTH_BYTES, P * L, len(kd),
                             "32-bit depth per entry" + (" (20-bit depth + 12 colour bits)" if self.packing else ""))]
         if not depth_only:
@@ -168,14 +171,36 @@ class FreePipeMDTS(Scheme):
                             geometry_passes=1 if self.packing or depth_only else 2,
                             dropped_fragments=int(n - len(kd)),
                             overflowed_pixels=int(np.count_nonzero(g.count > kept_n)),
-                            lists=CapturedLists(pix[order], order), stats=stats)
+                            lists=CapturedLists(order_pix, order), stats=stats)
 
     # ---------------------------------------------------------------- colour
-    def _colour_pass(self, trace, g, plan, kd):
+    def _colour_pass(self, trace, g, plan, kd, nearest: bool):
         """Second geometry pass: find own depth in the final array, store colour there."""
         P, L, n, pix = trace.pixel_count, self.layers, len(trace), g.pix
         cb = COLOUR_BYTES[self.colour_format]
-        slot_of_kept = rank_in_runs(pix[kd])
+        if nearest:
+            found, slot, winner = self._find_nearest(g, len(kd))
+        else:
+            found, slot, winner = self._find(g, kd)
+        layout = self.layout
+        plan.add(2, "load", "depth_array", n, slot + 1,
+                 lambda i, s: entry_index(pix[i], s, L, P, layout) * DEPTH_BYTES, DEPTH_BYTES)
+        writers = np.flatnonzero(found)
+        plan.add(2, "store", "colour_array", writers, 1,
+                 lambda i, s: entry_index(pix[writers[i]], slot[writers[i]], L, P, layout) * cb, cb, dep=True)
+        rgba = np.zeros((len(kd), 4), np.float32)          # cleared colour: transparent black
+        has = winner >= 0
+        put_rows(rgba, np.flatnonzero(has), store_colour(np.take(trace.rgba, winner[has], axis=0), self.colour_format))
+        rgba[has & trace.opaque[np.maximum(winner, 0)], 3] = 1.0
+        stats = {"colour_collisions": Stat(int(len(writers) - has.sum()), "fragments",
+                                           "colour stores overwritten by an equal-depth fragment's store")}
+        return kd, rgba, stats
+
+    def _find(self, g, kd):
+        """Each fragment's own value in the final arrays: (found, slot of its walk's last load, the last
+        writer of each entry (submission order) or -1)."""
+        n, L = g.n, self.layers
+        slot_of_kept = rank_in_runs(g.pix[kd])
         value = np.empty(n, np.int64)          # id of each fragment's (pixel, depth) value
         value[g.by_depth] = distinct_ids(g.pix_by_depth, g.key_by_depth)[0]
         # equal values sit next to each other in the array: the first occurrence is the lowest slot
@@ -187,22 +212,27 @@ class FreePipeMDTS(Scheme):
         found = entry >= 0
         # loads: walk until own value (slot + 1 loads) or to the end of the array (L loads)
         slot = np.where(found, slot_of_kept[np.maximum(entry, 0)] if len(kd) else 0, L - 1)
-        layout = self.layout
-        plan.add(2, "load", "depth_array", n, slot + 1,
-                 lambda i, s: entry_index(pix[i], s, L, P, layout) * DEPTH_BYTES, DEPTH_BYTES)
         writers = np.flatnonzero(found)
-        plan.add(2, "store", "colour_array", writers, 1,
-                 lambda i, s: entry_index(pix[writers[i]], slot[writers[i]], L, P, layout) * cb, cb, dep=True)
-        # the last writer (submission order) of each entry wins
         winner = np.full(len(kd), -1, np.int64)
         np.maximum.at(winner, entry[writers], writers)
-        rgba = np.zeros((len(kd), 4), np.float32)          # cleared colour: transparent black
-        has = winner >= 0
-        rgba[has] = store_colour(trace.rgba[winner[has]], self.colour_format)
-        rgba[has & trace.opaque[np.maximum(winner, 0)], 3] = 1.0
-        stats = {"colour_collisions": Stat(int(len(writers) - has.sum()), "fragments",
-                                           "colour stores overwritten by an equal-depth fragment's store")}
-        return kd, rgba, stats
+        return found, slot, winner
+
+    def _find_nearest(self, g, kept: int):
+        """:meth:`_find` when the arrays hold each pixel's nearest fragments: in depth order, where a value's
+        fragments sit together (submission order) and the arrays hold each pixel's first ``layers``."""
+        n, L, order = g.n, self.layers, g.by_depth
+        rank = g.rank_by_depth
+        ids = distinct_ids(g.pix_by_depth, g.key_by_depth)[0]
+        first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]][:n])     # each value's first fragment
+        last = np.append(first[1:], n)[:len(first)] - 1                     # ... and its last: the winner
+        stored = rank[first] < L                # the value's first fragment took an entry: its slot
+        entry = np.where(stored, np.cumsum(rank < L)[first] - 1, -1)
+        found, slot = np.empty(n, bool), np.empty(n, np.int64)
+        found[order] = stored[ids]
+        slot[order] = np.where(stored, rank[first], L - 1)[ids]
+        winner = np.full(kept, -1, np.int64)
+        winner[entry[stored]] = order[last[stored]]
+        return found, slot, winner
 
     # ---------------------------------------------------------------- packing
     def _packing_alpha(self, trace, g) -> float:

@@ -99,6 +99,11 @@ class PixelGroups:
         return lex_sorted(self.pix, self.key)
 
     @cached_property
+    def rank_by_depth(self) -> np.ndarray:
+        """Position of each fragment among its pixel's fragments in depth order, in ``by_depth`` order."""
+        return rank_in_runs(self.pix_by_depth)
+
+    @cached_property
     def distinct_rank(self) -> np.ndarray:
         """0-based rank of each fragment's depth among the distinct depths of its pixel."""
         rank = np.empty(self.n, np.int64)
