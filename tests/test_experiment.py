@@ -106,7 +106,7 @@ def test_config_command_prints_runs_and_count(tmp_path, capsys):
 
 @pytest.mark.parametrize("text, message", [
     ('scenes = ["default"]\nbogus = 1\n[schemes.alpha-blend]\n', "bogus: unknown key (valid: name, description"),
-    ('scenes = ["default"]\n[schemes.teapot]\n', "schemes.teapot: unknown scheme 'teapot' (valid: alpha-blend"),
+    ('scenes = ["default"]\n[schemes.teapot]\n', "schemes.teapot: unknown scheme 'teapot' (valid: adaptive-bucket-depth-peeling, alpha-blend"),
     ('scenes = ["default"]\n[schemes.kbuffer]\nkk = 4\n', "schemes.kbuffer.kk: unknown parameter of kbuffer "
                                                           "(valid: k, mode"),
     ('scenes = ["default"]\n[schemes.kbuffer]\nk = [4, 0]\n', "schemes.kbuffer: k: must be >= 1"),

@@ -41,7 +41,7 @@ def test_replay_writes_image_difference_and_stats(trace_file, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--scheme", "abuffer"], "unknown scheme (valid: alpha-blend"),
+    (["--scheme", "abuffer"], "unknown scheme (valid: adaptive-bucket-depth-peeling, alpha-blend"),
     (["--scheme", "kbuffer", "--param", "kk=3"], "kk: unknown key (valid: k, mode"),
     (["--scheme", "kbuffer", "--param", "k=0"], "k: must be >= 1"),
     (["--scheme", "kbuffer", "--param", "k"], "--param k: expected NAME=VALUE, e.g. --param k=8"),

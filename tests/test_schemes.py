@@ -28,7 +28,7 @@ def exact(result, trace, tol=1e-5):
 def test_registry_lists_every_scheme_and_rejects_unknown_names():
     assert set(ALL) >= {"alpha-blend", "depth-peeling", "dual-depth-peeling", "freepipe-mdts", "freepipe-abuffer",
                         "kbuffer", "stencil-routed-abuffer", "linked-list", "wboit"}
-    with pytest.raises(ConfigError, match="unknown scheme .*valid: alpha-blend"):
+    with pytest.raises(ConfigError, match="unknown scheme .*valid: adaptive-bucket-depth-peeling, alpha-blend"):
         make_scheme("a-buffer")
     with pytest.raises(ConfigError, match="layerz: unknown key .*valid: layers"):
         make_scheme("freepipe-mdts", {"layerz": 3})
