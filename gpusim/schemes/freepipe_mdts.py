@@ -110,6 +110,7 @@ class FreePipeMDTS(Scheme):
             plan.add(0, "store", "colour_array", entries, 1, lambda i, s: i * cb, cb)
 
         kept: dict[str, np.ndarray] = {}
+        kept_pix: dict[str, np.ndarray] = {}
         frags = n
         if self.packing:   # depth and a colour half packed into each of the two words
             plan.compute(1, frags, len(values) * PACK_DEPTH_COLOUR, dep=False)
@@ -119,9 +120,11 @@ class FreePipeMDTS(Scheme):
             every = bool(storable.all())
             nearest = every and not self.packing and self.direction == "min"    # sort_value is the depth key
             if nearest:
-                kept[name] = g.by_depth[g.rank_by_depth < L]                   # each pixel's nearest L
+                near = g.rank_by_depth < L                                     # each pixel's nearest L
+                kept[name], kept_pix[name] = g.by_depth[near], g.pix_by_depth[near]
             else:
-                kept[name] = smallest_per_pixel(pix, sort_value, L, None if every else np.flatnonzero(storable))
+                kept[name], kept_pix[name] = smallest_per_pixel(pix, sort_value, L, None if every
+                                                                else np.flatnonzero(storable), with_pixels=True)
             # a chain ends at the first empty entry: one atomic per entry filled before it + 1, at most L
             before = g.arrival if every else count_before_in_pixel(pix, g.by_arrival, storable)
             filled_before = np.minimum(before, L)
@@ -131,10 +134,10 @@ class FreePipeMDTS(Scheme):
                      lambda i, s: entry_index(pix[i], s, L, P, layout) * size, size, dep=True)
 
         kd = kept["depth_array"]
-        kept_n = np.bincount(pix[kd], minlength=P)
+        kept_n = np.bincount(kept_pix["depth_array"], minlength=P)
         stats: dict[str, Stat] = {}
         if self.packing:
-            order, rgba, stats = self._resolve_packed(trace, g, values, kept, alpha, hi_lo)
+            order, rgba, stats = self._resolve_packed(trace, values, kept, kept_pix, alpha, hi_lo)
         elif depth_only:                 # the effect shades each layer itself: the image shows its fragment's colour
             order, rgba = kd, store_colour(trace.rgba[kd], self.colour_format)
             rgba[trace.opaque[kd], 3] = 1.0
@@ -246,16 +249,16 @@ class FreePipeMDTS(Scheme):
                               f"trace's alpha ranges {lo:g}..{hi:g} (opaque = 1); pass --param alpha=VALUE to use one")
         return lo
 
-    def _resolve_packed(self, trace, g, values, kept, alpha, true24):
+    def _resolve_packed(self, trace, values, kept, kept_pix, alpha, true24):
         kd, kc = kept["depth_array"], kept["colour_array"]
+        pd_, pc = kept_pix["depth_array"], kept_pix["colour_array"]
         # the resolve reads entry i of both arrays; use the slots both arrays filled
-        both = np.minimum(np.bincount(g.pix[kd], minlength=trace.pixel_count),
-                          np.bincount(g.pix[kc], minlength=trace.pixel_count))
-        kd = kd[rank_in_runs(g.pix[kd]) < both[g.pix[kd]]]
-        kc = kc[rank_in_runs(g.pix[kc]) < both[g.pix[kc]]]
-        pd_ = g.pix[kd]
-        c24 = ((values["depth_array"][kd] & np.uint32(0xFFF)) << np.uint32(12)) | \
-              (values["colour_array"][kc] & np.uint32(0xFFF))
+        both = np.minimum(np.bincount(pd_, minlength=trace.pixel_count), np.bincount(pc, minlength=trace.pixel_count))
+        in_both = rank_in_runs(pd_) < both[pd_]
+        kd, pd_ = kd[in_both], pd_[in_both]
+        kc = kc[rank_in_runs(pc) < both[pc]]
+        depth_word = values["depth_array"][kd]
+        c24 = ((depth_word & np.uint32(0xFFF)) << np.uint32(12)) | (values["colour_array"][kc] & np.uint32(0xFFF))
         rgba = np.empty((len(kd), 4), np.float32)
         rgba[:, :3] = colour24_rgb(c24)
         rgba[:, 3] = alpha
@@ -264,7 +267,7 @@ class FreePipeMDTS(Scheme):
         same_pixel = pd_[1:] == pd_[:-1]
         step = np.diff(z) if self.direction == "min" else -np.diff(z)
         inversions = int(np.count_nonzero(same_pixel & (step < 0)))
-        d20 = values["depth_array"][kd] >> np.uint32(12)
+        d20 = depth_word >> np.uint32(12)
         collisions = int(np.count_nonzero(same_pixel & (d20[1:] == d20[:-1]) & (z[1:] != z[:-1])))
         stats = {
             "packing_colour_mismatches": Stat(int(np.count_nonzero(c24 != true24)), "entries",

@@ -166,8 +166,10 @@ def reversed_runs(pix_sorted: np.ndarray) -> np.ndarray:
 
 
 def smallest_per_pixel(pix: np.ndarray, value: np.ndarray, limit: int,
-                       candidates: np.ndarray | None = None, order: np.ndarray | None = None) -> np.ndarray:
-    """Indices of the ``limit`` smallest ``value`` s of each pixel, grouped by pixel, ascending.
+                       candidates: np.ndarray | None = None, order: np.ndarray | None = None,
+                       with_pixels: bool = False):
+    """Indices of the ``limit`` smallest ``value`` s of each pixel, grouped by pixel, ascending
+    (and, ``with_pixels``, their pixel ids).
 
     Equal values keep submission (index) order. ``candidates`` restricts the
     choice to those indices (others never enter the array). ``order``, when the
@@ -176,8 +178,12 @@ def smallest_per_pixel(pix: np.ndarray, value: np.ndarray, limit: int,
     """
     if order is None:
         idx = np.arange(len(pix)) if candidates is None else np.asarray(candidates, dtype=np.int64)
-        order = idx[lex_order(pix[idx], value[idx])]
-    return order[rank_in_runs(pix[order]) < limit]
+        perm, order_pix = lex_sorted(pix[idx], value[idx])
+        order = idx[perm]
+    else:
+        order_pix = pix[order]
+    keep = rank_in_runs(order_pix) < limit
+    return (order[keep], order_pix[keep]) if with_pixels else order[keep]
 
 
 def count_before_in_pixel(pix: np.ndarray, by_arrival: np.ndarray, flag: np.ndarray) -> np.ndarray:

@@ -59,4 +59,8 @@ def colour24(rgb: np.ndarray) -> np.ndarray:
 def colour24_rgb(c24: np.ndarray) -> np.ndarray:
     """0xRRGGBB -> (N, 3) float RGB in [0, 1]."""
     c24 = np.asarray(c24, dtype=np.uint32)
-    return np.stack([(c24 >> 16) & 0xFF, (c24 >> 8) & 0xFF, c24 & 0xFF], axis=1) / 255.0
+    rgb = np.empty((len(c24), 3))
+    for k, shift in enumerate((16, 8, 0)):
+        rgb[:, k] = (c24 >> np.uint32(shift)) & np.uint32(0xFF)
+    rgb /= 255.0
+    return rgb
