@@ -350,14 +350,19 @@ def bucket_kept(name, trace) -> np.ndarray:
     np.divide(z - near[pix], span, out=t, where=span > 0)
     if name == "bucket-depth-peeling":
         bucket = np.minimum((t * np.float32(32)).astype(np.int64), 31)
-    else:
+    else:                       # each bin's rank among its pixel's occupied bins: distinct (pixel, bin) pairs
         bins = np.minimum((t * np.float32(512)).astype(np.int64), 511)
-        bucket = np.zeros(n, np.int64)
-        for p in np.unique(pix):
-            at = pix == p
-            occupied = np.unique(bins[at])
-            rank = np.searchsorted(occupied, bins[at])
-            bucket[at] = rank if len(occupied) <= 32 else rank * 32 // len(occupied)
+        order = np.argsort(pix * 512 + bins, kind="stable")
+        ps, pair = pix[order], (pix * 512 + bins)[order]
+        distinct = np.cumsum(np.r_[True, pair[1:] != pair[:-1]][:n]) - 1      # (pixel, bin) pairs so far
+        starts = np.flatnonzero(np.r_[True, ps[1:] != ps[:-1]][:n])
+        first_of_pixel = np.repeat(distinct[starts], np.diff(np.r_[starts, n]))
+        rank = np.empty(n, np.int64)
+        rank[order] = distinct - first_of_pixel
+        occupied = np.zeros(trace.pixel_count, np.int64)
+        np.maximum.at(occupied, pix, rank + 1)
+        count = occupied[pix]
+        bucket = np.where(count <= 32, rank, rank * 32 // np.maximum(count, 1))
     key = depth_key(trace.z).astype(np.int64)
     order = np.lexsort((np.arange(n), -key, bucket, pix))          # farthest first, ties in submission order
     first = np.r_[True, (pix[order][1:] != pix[order][:-1]) | (bucket[order][1:] != bucket[order][:-1])][:n]
@@ -368,15 +373,20 @@ def bucket_kept(name, trace) -> np.ndarray:
 
 def peel_kept(trace, k: int) -> np.ndarray:
     """The multi-pass k-buffer's kept fragments: pass after pass, each pixel's k nearest (equal depths in
-    submission order) strictly behind the farthest its previous pass kept."""
-    pix, key = trace.pixel_ids(), depth_key(trace.z).astype(np.int64)
-    keep = np.zeros(len(trace), bool)
-    for p in np.unique(pix):
-        left = sorted(np.flatnonzero(pix == p).tolist(), key=lambda i: (key[i], i))
-        while left:
-            kept = left[:k]
-            keep[kept] = True
-            left = [i for i in left[k:] if key[i] > key[kept[-1]]]
+    submission order) strictly behind the farthest its previous pass kept. Each pixel's fragments sorted by
+    (depth, submission): a pass keeps k from where the last one stopped, the next starts past its last depth."""
+    pix, key, n = trace.pixel_ids(), depth_key(trace.z).astype(np.int64), len(trace)
+    order = np.lexsort((np.arange(n), key, pix))
+    packed = pix[order] * (1 << 33) + key[order]                   # ascending: pixels, then depths
+    start = np.flatnonzero(np.r_[True, pix[order][1:] != pix[order][:-1]]) if n else np.zeros(0, np.int64)
+    end = np.r_[start[1:], n].astype(np.int64)
+    at, keep = start.copy(), np.zeros(n, bool)
+    while len(at):
+        take = np.minimum(k, end - at)
+        keep[order[np.repeat(at, take) + np.arange(int(take.sum())) - np.repeat(np.cumsum(take) - take, take)]] = True
+        at = np.searchsorted(packed, packed[at + take - 1], side="right")       # past the pass's last depth
+        more = at < end
+        at, end = at[more], end[more]
     return keep
 
 
@@ -504,7 +514,10 @@ def documented_drops(name, trace) -> tuple[int, int]:
     if s.capacity == "pool":
         pool = int(np.ceil(s.limit * trace.pixel_count))
         return max(n - pool, 0), len(np.unique(pix[pool:]))
-    if s.ties == "first-only" or s.capacity in ("bucket", "peel"):   # depth peeling's tie losses, collisions
+    if s.capacity in ("bucket", "peel"):            # collisions; equal depths cut by a pass
+        keep = bucket_kept(name, trace) if s.capacity == "bucket" else peel_kept(trace, int(s.limit))
+        return n - int(keep.sum()), len(np.unique(pix[~keep]))
+    if s.ties == "first-only":                      # depth peeling: tie losses
         order = documented_order(name, trace)
         return n - len(order), int(np.count_nonzero(count > np.bincount(pix[order], minlength=trace.pixel_count)))
     return 0, 0

@@ -220,7 +220,8 @@ class AdaptiveBucketDepthPeeling(Scheme):
         _route(plan, 3, n, pix, P, BUCKET_INDEX + words * POPCOUNT_WORD + EQUALISE + BUCKETS * CHANNEL_SELECT, n,
                "buckets", 0, _targets(BUCKETS), reads=("histogram", targets))
         kept = one_per_bucket(pix, bucket, g.key)
-        used_words = len(np.unique(pix * words + bin_ // 32)) if n else 0
+        word = bin_[order] // 32                 # the histogram words holding an occupied bin: (pixel, word) runs
+        used_words = int(np.count_nonzero(np.r_[True, (ps[1:] != ps[:-1]) | (word[1:] != word[:-1])])) if n else 0
         hist = Structure("histogram", 4, P * words, used_words,
                          f"{H} occupancy bits per pixel ({targets} RGBA32UI targets), 32 bins per word")
         merged = int(np.count_nonzero(occupied > BUCKETS))

@@ -4,13 +4,14 @@ technical report, 2006; seed 000 Table 3's "Liu", 5-9 geometry passes, 20 MB).
 Depth peeling that peels k layers per geometry pass: each ``peel`` pass captures the next k nearest fragments
 of every pixel with the k-buffer's read-modify-write (gpusim.schemes.kbuffer in ``peel`` mode, the same
 ``hw`` choices: on current hardware k ``rmw_read`` and k ``rmw_write`` per fragment through the texture path,
-with the same RMW hazards), then a full-screen ``resolve`` composites the pass's entries under the colour
-accumulated so far (a ``blend`` into ``accumulation``, RGBA32F) and stores the farthest as the pixel's
-``peel_depth``. From the second peel pass on every fragment loads its pixel's peel depth and goes on only when
-strictly behind it (``PEEL_TEST``, as depth peeling); a ``clear`` pass empties the k entries before each peel
-pass after the first. Passes go on until no fragment is left: with ``termination = known-layers`` the last
-one is the last to capture anything (ceil(L / k) passes for L distinct depths), with ``occlusion-query`` one
-more runs whose query finds no fragment left.
+with the same RMW hazards), then a full-screen ``resolve`` reads each pixel's k entries, composites them
+under the colour accumulated so far (a ``blend`` into ``accumulation``, RGBA32F), stores the farthest as the
+pixel's ``peel_depth`` and writes the k entries back empty for the next pass (an MRT output each). As depth
+peeling's blend passes, a resolve counts the pixels its pass captured something at (the others have nothing
+to do). From the second peel pass on every fragment loads its pixel's peel depth and goes on only when
+strictly behind it (``PEEL_TEST``, as depth peeling). Passes go on until no fragment is left: with
+``termination = known-layers`` the last one is the last to capture anything (ceil(L / k) passes for L
+distinct depths), with ``occlusion-query`` one more runs whose query finds no fragment left.
 
 Equal depths: inside a pass as the k-buffer (a fragment goes behind stored ones of equal depth, so the first
 submitted is nearer); fragments of the depth a pass ended at that did not fit in its k entries are never
@@ -84,10 +85,8 @@ class MultipassKBuffer(Scheme):
         m = len(peels)
         total = m + (1 if self.termination == "occlusion-query" and n else 0)
 
-        passes, peel_at, resolve_at = [Pass("clear 0", "clear", "entry")], [], []
+        passes, peel_at, resolve_at = [Pass("clear", "clear", "entry")], [], []
         for p in range(max(total, 1)):
-            if p:
-                passes.append(Pass(f"clear {p}", "clear", "entry"))
             peel_at.append(len(passes))
             passes.append(Pass(f"peel {p}", "geometry", "fragment"))
             if p < m:
@@ -98,8 +97,6 @@ class MultipassKBuffer(Scheme):
         plan.add(0, "store", "kbuffer", P * k, 1, entries, entry_bytes)
         plan.add(0, "store", "peel_depth", P, 1, lambda i, s: i * DEPTH_BYTES, DEPTH_BYTES)
         plan.add(0, "store", "accumulation", P, 1, lambda i, s: i * FRAMEBUFFER_BYTES, FRAMEBUFFER_BYTES)
-        for p in range(1, m):
-            plan.add(peel_at[p] - 1, "store", "kbuffer", P * k, 1, entries, entry_bytes)
         # every pass after the first: the pixel's peel depth, strictly behind it or discard
         later = np.asarray(peel_at[1:], np.int64)
         plan.add(0, "load", "peel_depth", n, total - 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES,
@@ -108,15 +105,20 @@ class MultipassKBuffer(Scheme):
         for p, (alive, kept) in enumerate(peels):
             threads = np.sort(alive)
             add_rmw(plan, peel_at[p], threads, pix[threads], P, k, fmt, self.hw)
-            stored = np.bincount(pix[kept], minlength=P)
+            # the pixels with entries (kept is grouped by pixel): read, composite, blend in, keep the peel depth,
+            # empty the entries
+            pk = pix[kept]
+            first = np.r_[True, pk[1:] != pk[:-1]] if len(kept) else np.zeros(0, bool)
+            done = pk[first]
+            stored = np.diff(np.r_[np.flatnonzero(first), len(kept)])
             r = resolve_at[p]
-            plan.add(r, "load", "kbuffer", P, k, lambda i, s: entry_index(i, s, k, P, "layer-major") * entry_bytes,
-                     entry_bytes)
-            plan.compute(r, P, stored * COMPOSITE)
-            done = np.flatnonzero(stored)          # pixels with entries: blend them in, keep the peel depth
+            slot = lambda i, s, d=done: entry_index(d[i], s, k, P, "layer-major") * entry_bytes  # noqa: E731
+            plan.add(r, "load", "kbuffer", done, k, slot, entry_bytes)
+            plan.compute(r, done, stored * COMPOSITE)
             plan.add(r, "blend", "accumulation", done, 1, lambda i, s, d=done: d[i] * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES, dep=True)
             plan.add(r, "store", "peel_depth", done, 1, lambda i, s, d=done: d[i] * DEPTH_BYTES, DEPTH_BYTES)
+            plan.add(r, "store", "kbuffer", done, k, slot, entry_bytes)
 
         kept_all = np.concatenate([kept for _, kept in peels]) if peels else np.zeros(0, np.int64)
         rank = np.repeat(np.arange(m), [len(kept) for _, kept in peels])
@@ -124,7 +126,7 @@ class MultipassKBuffer(Scheme):
         lost = n - len(order)
         kept_n = np.bincount(pix[order], minlength=P)
         struct = [Structure("kbuffer", entry_bytes, P * k, int(kept_n.clip(max=k).sum()),
-                            f"k entries of depth + {fmt} colour (emptied before each peel pass)"),
+                            f"k entries of depth + {fmt} colour (emptied by each resolve)"),
                   Structure("peel_depth", DEPTH_BYTES, P, g.covered, "depth the pixel's previous pass ended at"),
                   Structure("accumulation", FRAMEBUFFER_BYTES, P, g.covered, "RGBA32F colour composited so far")]
         stats = {"tie_losses": Stat(int(lost), "fragments", "fragments at the depth a pass ended at that did "
