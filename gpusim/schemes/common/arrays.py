@@ -111,12 +111,13 @@ def _from_zero(key) -> tuple[np.ndarray, int, int]:
 
 def _sort_word(word: np.ndarray, ib: int, perm: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One stable pass: order by ``word`` (taken in ``perm`` order) with the position in the low ``ib`` bits.
-    Returns the composed permutation and the sorted packed word."""
+    Returns the composed permutation and the sorted packed word. ``word`` is a temporary the pass
+    may overwrite."""
     packed = word if perm is None else word[perm]
-    packed = packed << np.uint64(ib)
+    packed <<= np.uint64(ib)
     packed |= np.arange(len(packed), dtype=np.uint64)
     packed.sort()
-    step = (packed & np.uint64((1 << ib) - 1)).astype(np.intp)
+    step = (packed & np.uint64((1 << ib) - 1)).view(np.intp)      # below 2**63: the same numbers
     return (step if perm is None else perm[step]), packed
 
 
