@@ -22,6 +22,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.hw.unit import (BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, address_ids, cycles, div, fp_costs,
                             interleave, mod, register_unit)
+from gpusim.metrics.composite import run_starts
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,7 @@ class AtomicUnit(Unit):
         self.lanes_of = np.r_[0, np.cumsum(nops[hit])].tolist()
         if len(cell) > 1 and not (cell[1:] >= cell[:-1]).all():
             addr = addr[np.argsort(cell, kind="stable")]
+        self.addresses = addr                  # each lane's (the program's rows; kept for detached)
         ids, self.ops_per_address = address_ids(addr)
         self.lane_address = ids.tolist()
         self.address_free = [0] * (int(ids.max()) + 1 if len(ids) else 0)      # cycle each address is free
@@ -106,6 +108,19 @@ class AtomicUnit(Unit):
         """The cycle every unit and address is free again."""
         return max(self.until, cycles(max(self.free)))
 
+    def detached(self) -> "AtomicUnit":
+        """With the operations per distinct address (what ``absorb`` adds up by address)."""
+        out = super().detached()
+        out.addresses, out.ops_per_address = _per_address(self.addresses, np.ones(len(self.addresses), np.int64))
+        return out
+
+    def absorb(self, other: "AtomicUnit") -> None:
+        """Operations per address added up by address (``self`` and ``other`` detached)."""
+        super().absorb(other)
+        self.addresses, self.ops_per_address = _per_address(np.concatenate([self.addresses, other.addresses]),
+                                                            np.concatenate([self.ops_per_address,
+                                                                            other.ops_per_address]))
+
     def values(self, total_cycles: int) -> dict:
         ops = self.ops_per_address
         return super().values(total_cycles) | {"hottest_address_ops": int(ops.max()) if len(ops) else 0,
@@ -115,3 +130,14 @@ class AtomicUnit(Unit):
         ops = self.ops_per_address
         return super().summary(total_cycles) | {"addresses": int(len(ops)),
                                                 "hottest_address_ops": int(ops.max()) if len(ops) else 0}
+
+
+def _per_address(addresses: np.ndarray, ops: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct ``addresses`` (ascending) and the ``ops`` of each added up (a sort: numpy's hashing
+    ``unique`` is far slower on millions of addresses)."""
+    order = np.argsort(addresses, kind="stable")
+    addresses = addresses[order]
+    if not len(addresses):
+        return addresses, ops[:0]
+    starts = run_starts(addresses)
+    return addresses[starts], np.add.reduceat(ops[order], starts)

@@ -19,34 +19,43 @@ from gpusim.opplan import OPS
 RMW_READ, RMW_WRITE = OPS.index("rmw_read"), OPS.index("rmw_write")
 
 
-def rmw_windows(program: Program, service: np.ndarray, threads: int):
-    """(read cycle, write cycle) of each fragment thread (-1 where it has no RMW); ``service``: per row of the
-    coalescer's instructions, the cycle its partition served it (Coalescer.rmw_service_cycles).
+def rmw_operations(program: Program, machine):
+    """The RMW operations a machine served: (pass, thread, service cycle) of the ``rmw_read`` rows and of
+    the ``rmw_write`` rows of the coalescer (the cycle its partition served each:
+    Coalescer.rmw_service_cycles); None when it served none."""
+    coalescer = machine.units.get("coalescer")
+    service = coalescer.rmw_service_cycles() if coalescer is not None else None
+    if service is None or not (service >= 0).any():
+        return None
+    rows = program.rows_of("coalescer")
+    row_pass = program.wi_pass[program.storage("coalescer")[2]]
+    return tuple((row_pass[m], rows.thread[m], service[m]) for m in (rows.op == RMW_READ, rows.op == RMW_WRITE))
+
+
+def rmw_windows(reads: tuple, writes: tuple, threads: int):
+    """(read cycle, write cycle) of each fragment thread (-1 where it has no RMW), from the RMW operations
+    (:func:`rmw_operations`; a run replayed a chunk of passes at a time gathers them from each chunk).
 
     A thread that read-modify-writes in several passes (a multi-pass k-buffer's peel passes) has a window in
     each, and passes are barriers: then both are (passes, threads) arrays, a row per pass that holds RMW
     operations, in pass order."""
-    rows = program.rows_of("coalescer")
-    r = rows.op == RMW_READ
-    w = rows.op == RMW_WRITE
-    slot, passes = _pass_slots(program, r | w, rows.thread, threads)
+    (read_pass, read_thread, read_at), (write_pass, write_thread, write_at) = reads, writes
+    slot, passes = _pass_slots(np.concatenate([read_pass, write_pass]), np.concatenate([read_thread, write_thread]),
+                               threads)
     read = np.full((passes, threads), np.iinfo(np.int64).max, np.int64)
     write = np.full((passes, threads), -1, np.int64)
-    np.minimum.at(read, (slot[r], rows.thread[r]), service[r])
-    np.maximum.at(write, (slot[w], rows.thread[w]), service[w])
+    np.minimum.at(read, (slot[:len(read_pass)], read_thread), read_at)
+    np.maximum.at(write, (slot[len(read_pass):], write_thread), write_at)
     read[read == np.iinfo(np.int64).max] = -1
     return (read[0], write[0]) if passes == 1 else (read, write)
 
 
-def _pass_slots(program: Program, rmw: np.ndarray, thread: np.ndarray, threads: int):
-    """Per coalescer row, the row of its RMW window (0 for every row unless some thread read-modify-writes in
-    more than one pass: then the rank of the row's pass among the passes with RMW rows), and the count."""
-    zero = np.zeros(len(rmw), np.int64)
-    if not rmw.any():
-        return zero, 1
-    row_pass = program.wi_pass[program.storage("coalescer")[2]]
-    rp, th = row_pass[rmw], thread[rmw]
-    if rp.min() == rp.max():
+def _pass_slots(rp: np.ndarray, th: np.ndarray, threads: int):
+    """Per RMW operation (its pass ``rp``, thread ``th``), the row of its window (0 for every operation unless
+    some thread read-modify-writes in more than one pass: then the rank of its pass among the passes with RMW
+    operations), and the count."""
+    zero = np.zeros(len(rp), np.int64)
+    if not len(rp) or rp.min() == rp.max():
         return zero, 1
     lo = np.full(threads, np.iinfo(np.int64).max, np.int64)
     hi = np.full(threads, -1, np.int64)
@@ -55,7 +64,14 @@ def _pass_slots(program: Program, rmw: np.ndarray, thread: np.ndarray, threads: 
     if not ((hi >= 0) & (lo != hi)).any():     # each thread in one pass (k-buffer batches): one window each
         return zero, 1
     passes = np.unique(rp)
-    return np.searchsorted(passes, row_pass), len(passes)
+    return np.searchsorted(passes, rp), len(passes)
+
+
+def machine_windows(program: Program, machine, threads: int):
+    """The RMW windows (:func:`rmw_windows`) of a program a machine replayed, or None when it served no RMW
+    instruction."""
+    ops = rmw_operations(program, machine)
+    return None if ops is None else rmw_windows(*ops, threads)
 
 
 def count_hazards(pixel: np.ndarray, read: np.ndarray, write: np.ndarray) -> tuple[int, int]:

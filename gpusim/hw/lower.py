@@ -153,11 +153,54 @@ def split_by(values: np.ndarray) -> list[tuple[int, np.ndarray]]:
     return [(int(v[a]), order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
-def _group_pieces(gi: int, g, bases: dict[str, int]) -> list[_Piece]:
-    """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes."""
+def pass_operations(plan: OpPlan) -> np.ndarray:
+    """Memory operations of each pass of ``plan``, expanding only groups whose passes a function gives."""
+    out = np.zeros(len(plan.passes), np.int64)
+    for g in plan.memory_groups:
+        if g.seq_pass is not None:            # op s of every thread with more than s of them, in seq_pass[s]
+            fewer = np.cumsum(np.bincount(g.count))         # threads with at most s ops
+            out[g.seq_pass[:len(fewer) - 1]] += len(g.count) - fewer[:-1]
+        elif g.pass_fn is not None:
+            out += np.bincount(np.asarray(g.pass_of(*g.expand_ops()), np.int64), minlength=len(out))
+        elif np.isscalar(g.pass_index):
+            out[int(g.pass_index)] += g.total
+        else:
+            out += np.bincount(g.pass_index, weights=g.count, minlength=len(out)).astype(np.int64)
+    return out
+
+
+def ops_in_passes(g, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(i, seq)`` of group ``g``'s operations in passes ``lo`` to ``hi - 1``, in the order
+    :meth:`~gpusim.opplan.OpGroup.expand_ops` gives them; only those are expanded where the group says
+    where its passes fall (a pass of its own, ``seq_pass``, a pass per thread)."""
+    count = g.count
+    none = np.zeros(0, np.int64)
+    if g.seq_pass is not None:
+        s0, s1 = (int(s) for s in np.searchsorted(g.seq_pass, [lo, hi]))
+        who = np.flatnonzero(count > s0) if s1 > s0 else none
+        m = np.minimum(count[who], s1) - s0
+    elif g.pass_fn is None and not np.isscalar(g.pass_index):
+        s0, who = 0, np.flatnonzero((g.pass_index >= lo) & (g.pass_index < hi))
+        m = count[who]
+    elif g.pass_fn is None:
+        return g.expand_ops() if lo <= int(g.pass_index) < hi else (none, none)
+    else:
+        i, seq = g.expand_ops()
+        p = np.asarray(g.pass_of(i, seq), np.int64)
+        sel = np.flatnonzero((p >= lo) & (p < hi))
+        return i[sel], seq[sel]
+    i = np.repeat(who, m)
+    return i, np.arange(len(i), dtype=np.int64) - np.repeat(np.cumsum(m) - m, m) + s0
+
+
+def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None) -> list[_Piece]:
+    """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes; only those of passes
+    ``passes[0]`` to ``passes[1] - 1`` when given."""
     n = len(g.thread)
     threads = g.thread_ids()
-    i, seq = g.expand_ops()
+    i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
+    if not len(i):
+        return []
     single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
     instr = np.asarray(g.instructions)[i] if g.is_compute else None
     addr = np.asarray(g.offset(i, seq), np.int64) + (0 if g.is_compute else bases[g.structure])
@@ -180,14 +223,18 @@ def _bits(n: int) -> int:
     return max(1, int(n).bit_length())
 
 
-def lower(work: Workload, gpu, keep=None) -> Program:
+def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None) -> Program:
     """Warp instructions of ``work.plan`` on ``gpu``.
 
     ``keep(pass_index, threads) -> bool mask`` selects threads (the sampled
-    fidelity); a pass none of whose threads is kept runs whole.
+    fidelity); a pass none of whose threads is kept runs whole. ``passes``:
+    only the plan's passes ``passes[0]`` to ``passes[1] - 1``, as a program of
+    their own (its pass 0 is the plan's ``passes[0]``); their instructions are
+    those the whole program gives them.
     """
     plan = work.plan
-    total_ops = plan.total_ops()
+    p_first, p_end = passes if passes is not None else (0, len(plan.passes))
+    total_ops = plan.total_ops() if passes is None else int(pass_operations(plan)[p_first:p_end].sum())
     limit = gpu.runner.max_operations
     if total_ops > limit:
         raise GpusimError(f"the run would lower {total_ops:,} operations, over runner.max_operations = {limit:,} "
@@ -195,14 +242,16 @@ def lower(work: Workload, gpu, keep=None) -> Program:
                           f"before it samples); use --fidelity analytic, which estimates the run without lowering, "
                           f"or a smaller trace")
     ws = gpu.core.warp_size
-    n_pass = len(plan.passes)
-    modes = [thread_mapping(gpu, p) for p in plan.passes]
-    pieces = [pc for gi, g in enumerate(plan.groups) for pc in _group_pieces(gi, g, work.bases)]
+    n_pass = p_end - p_first
+    modes = [thread_mapping(gpu, p) for p in plan.passes[p_first:p_end]]
+    pieces = [pc for gi, g in enumerate(plan.groups) for pc in _group_pieces(gi, g, work.bases, passes)]
+    for pc in pieces:                  # pass numbers of this program
+        pc.pass_index -= p_first
     totals = np.zeros(n_pass, np.int64)
     for pc in pieces:
         totals[pc.pass_index] += pc.operations
     if keep is not None:
-        masks = [keep(pc.pass_index, pc.thread) for pc in pieces]
+        masks = [keep(pc.pass_index + p_first, pc.thread) for pc in pieces]
         kept = np.zeros(n_pass, np.int64)
         for pc, m in zip(pieces, masks):
             kept[pc.pass_index] += int(m.sum()) if pc.instructions is None else 0
@@ -215,14 +264,15 @@ def lower(work: Workload, gpu, keep=None) -> Program:
         if len(pc.thread):
             by_pass[pc.pass_index].append(pc)
 
-    units = tuple(dict.fromkeys(entry_unit(g.op) for g in plan.memory_groups))
+    # the units the program issues to, in plan order (those of the groups with operations here)
+    units = tuple(dict.fromkeys(entry_unit(plan.groups[pc.group].op) for pc in pieces if pc.instructions is None))
     passes, inst = [], []
     rows: dict[str, list] = {}         # unit -> row arrays of its pieces
     row_at: dict[str, int] = {}
     software = []                      # software-rasterizer passes: (pass, warps, setup cycles per warp,
                                        # triangle per lane)
     warp0 = 0
-    for p, pk in enumerate(plan.passes):
+    for p, pk in enumerate(plan.passes[p_first:p_end]):
         mode, ps = modes[p], by_pass[p]
         ops = sum(pc.operations for pc in ps)
         if not ps:
@@ -334,7 +384,8 @@ def lower(work: Workload, gpu, keep=None) -> Program:
     else:
         w = g = k = lo = hi = pa = wi_cycles = np.zeros(0, np.int64)
     op_of_group = np.array([-1 if gr.is_compute else OPS.index(gr.op) for gr in plan.groups] or [0], np.int64)
-    unit_of_group = np.array([COMPUTE if gr.is_compute else units.index(entry_unit(gr.op)) for gr in plan.groups]
+    unit_of_group = np.array([COMPUTE if gr.is_compute or entry_unit(gr.op) not in units
+                              else units.index(entry_unit(gr.op)) for gr in plan.groups]
                              or [0], np.int64)
     dep_of_group = np.array([gr.dep for gr in plan.groups] or [False], bool)
     wi_op, wi_unit, wi_dep = op_of_group[g], unit_of_group[g], dep_of_group[g]

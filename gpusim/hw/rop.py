@@ -56,6 +56,7 @@ class RopUnit(Unit):
                   "could end (the in-order launch real hardware has, which the model does not)",
                   per_instance=False))
     COUNTERS = {"stalls": operator.add, "max_held": max, "overflows": operator.add}   # merged across processes
+    KEPT = ("instances", "entries")
 
     def __init__(self, config: RopConfig, machine):
         super().__init__(config.units)

@@ -49,6 +49,7 @@ class Scoreboard(Unit):
              Stat("stalls", "attempts", "dispatch attempts held back"),
              Stat("max_held", "cells", "most cells in flight at once"))
     COUNTERS = {"stalls": operator.add, "max_held": max, "requests": operator.add}   # merged across processes
+    KEPT = ("instances", "entries")
 
     def __init__(self, config: ScoreboardConfig, machine):
         super().__init__(1)

@@ -24,17 +24,17 @@ import time
 
 import numpy as np
 
-from gpusim.hw.hazards import count_hazards, rmw_windows
+from gpusim.hw.hazards import count_hazards, machine_windows
 from gpusim.hw.lower import Workload, hashed, lower
 from gpusim.hw.machine import Machine
 from gpusim.hw.program import Program
+from gpusim.hw.stream import plan_chunks, run_streamed, unit_records
 from gpusim.hw.thesis import thesis_timing
 from gpusim.opplan import OPS
 
 
-def _base(gpu, fidelity: str, program: Program, n_ops: int) -> dict:
-    return {"fidelity": fidelity, "gpu": gpu.name, "instructions": int(program.instructions),
-            "operations": int(n_ops)}
+def _base(gpu, fidelity: str, instructions: int, n_ops: int) -> dict:
+    return {"fidelity": fidelity, "gpu": gpu.name, "instructions": int(instructions), "operations": int(n_ops)}
 
 
 def _finish(rec: dict, gpu, cycles: int) -> dict:
@@ -43,14 +43,13 @@ def _finish(rec: dict, gpu, cycles: int) -> dict:
     return rec
 
 
-def _hazards(rec: dict, program: Program, machine: Machine, work: Workload, result, reference):
-    """RMW hazards from the event times, and the image replayed in event order."""
+def _hazards(rec: dict, windows, work: Workload, result, reference):
+    """RMW hazards from the event times (the RMW ``windows``, or None), and the image replayed in event
+    order."""
     rec["rmw_hazards"], rec["rmw_hazard_pixels"] = 0, 0
-    coalescer = machine.units.get("coalescer")
-    service = coalescer.rmw_service_cycles() if coalescer is not None else None
-    if service is None or not (service >= 0).any():
+    if windows is None:
         return None
-    read, write = rmw_windows(program, service, len(work.frag_pixel))
+    read, write = windows
     h, hp = count_hazards(work.frag_pixel, read, write)
     rec["rmw_hazards"], rec["rmw_hazard_pixels"] = int(h), int(hp)
     replay = result.extras.get("rmw_replay") if result is not None else None
@@ -72,17 +71,35 @@ def run_full(work: Workload, gpu, result=None, reference=None, program: Program 
     or None). ``progress``: a tqdm-like bar to count the warps done on."""
     start = time.perf_counter()
     sampled = program is not None
+    chunks = None if sampled else plan_chunks(work, gpu)
+    if chunks is not None:               # too large to lower at once: a chunk of passes at a time
+        return _run_streamed(work, gpu, chunks, result, reference, progress, start)
     if program is None:
         program = lower(work, gpu)
     machine = Machine(gpu, program, work.width, progress)
     total = machine.run()
-    rec = _base(gpu, "full", program, program.operations)
+    rec = _base(gpu, "full", program.instructions, program.operations)
     rec["passes"] = [{"name": p.name, "kind": p.kind, "cycles": c, "warps": p.warps}
                      for p, c in zip(program.passes, machine.pass_cycles)]
     rec["units_built"] = machine.built_units()
     rec["units"] = machine.unit_summaries(total)
     rec["unit_stats"] = machine.unit_stats(total)
-    image = _hazards(rec, program, machine, work, None if sampled else result, reference)
+    image = _hazards(rec, machine_windows(program, machine, len(work.frag_pixel)), work,
+                     None if sampled else result, reference)
+    rec["event_seconds"] = time.perf_counter() - start
+    return _finish(rec, gpu, total), image
+
+
+def _run_streamed(work: Workload, gpu, chunks, result, reference, progress, start: float):
+    """:func:`run_full` a chunk of passes at a time (gpusim.hw.stream); the same record, plus ``streamed``."""
+    passes, units, instructions, operations, windows = run_streamed(work, gpu, chunks, progress)
+    total = sum(p[2] for p in passes)
+    rec = _base(gpu, "full", instructions, operations)
+    rec["passes"] = [{"name": name, "kind": kind, "cycles": c, "warps": warps} for name, kind, c, warps in passes]
+    rec["units_built"] = list(units)
+    rec["units"], rec["unit_stats"] = unit_records(units, total)
+    image = _hazards(rec, windows, work, result, reference)
+    rec["streamed"] = {"chunks": len(chunks), "passes": [list(c) for c in chunks]}
     rec["event_seconds"] = time.perf_counter() - start
     return _finish(rec, gpu, total), image
 

@@ -30,6 +30,7 @@ up).
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -125,6 +126,10 @@ class Unit:
     STATS: ClassVar[tuple[Stat, ...]] = (BUSY, REQUESTS, UTILISATION)
     #: counters a run changes, merged across the processes of a parallel run (name -> how)
     COUNTERS: ClassVar[dict] = {}
+    #: per-instance counts, added up over the machines of a run replayed a chunk of passes at a time
+    #: (gpusim.hw.stream); ``KEPT``: the other attributes the unit's stats read
+    TOTALS: ClassVar[tuple[str, ...]] = ("busy_fp", "requests")
+    KEPT: ClassVar[tuple[str, ...]] = ("instances",)
     #: the unit above this one in the unit tree (``memory`` for a memory level), for its stats' path
     parent: ClassVar[str] = ""
 
@@ -145,6 +150,22 @@ class Unit:
         """Whether a machine running ``program`` on ``gpu`` builds this unit: by default, when the program
         issues an operation the unit takes or is reached by."""
         return bool((cls.issued | cls.reached) & program.operation_names())
+
+    def detached(self) -> "Unit":
+        """A copy holding only what the unit's stats read (``KEPT``, ``TOTALS``, ``COUNTERS``), without the
+        machine and program behind it (gpusim.hw.stream keeps it after dropping them)."""
+        out = object.__new__(type(self))
+        out.__dict__.update({a: getattr(self, a) for a in dict.fromkeys((*self.KEPT, *self.TOTALS, *self.COUNTERS))})
+        return out
+
+    def absorb(self, other: "Unit") -> None:
+        """Add what ``other`` counted (this unit, on the machine that replayed other passes of the run):
+        ``TOTALS`` added, ``COUNTERS`` merged as they say."""
+        for a in dict.fromkeys((*self.TOTALS, *self.COUNTERS)):
+            how = self.COUNTERS.get(a, operator.add)
+            mine, theirs = getattr(self, a), getattr(other, a)
+            setattr(self, a, [how(x, y) for x, y in zip(mine, theirs)] if isinstance(mine, list)
+                    else how(mine, theirs))
 
     # the interface the core and the machine use
     def serve(self, wi: int, now: int):

@@ -44,6 +44,7 @@ class Coalescer(MemoryLevel):
     STATS = (Stat("requests", "requests", "coalesced requests sent to the partition"),
              Stat("bytes", "bytes", "bytes requested from the partition (whole sectors)"))
     COUNTERS: dict = {}
+    TOTALS = ("requests", "bytes")
 
     def __init__(self, config: CoalescerConfig, machine):
         super().__init__(machine)
