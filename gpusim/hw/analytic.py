@@ -56,8 +56,17 @@ def _lane_keys(parts: list) -> np.ndarray:
     first = parts[0]
     if all(p is first or (len(p) == len(first) and np.array_equal(p, first)) for p in parts[1:]):
         return first
-    lo = min(int(p[0]) for p in parts if len(p))
-    mask = np.zeros(max(int(p[-1]) for p in parts if len(p)) + 1 - lo, bool)
+    return _union(parts)
+
+
+def _union(parts: list) -> np.ndarray:
+    """The sorted distinct values of integer arrays: a mask over their range, no sort (numpy's hashing
+    ``unique`` takes seconds on tens of millions of fragments)."""
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return np.zeros(0, np.int64)
+    lo = min(int(p.min()) for p in parts)
+    mask = np.zeros(max(int(p.max()) for p in parts) + 1 - lo, bool)
     for p in parts:
         mask[p - lo] = True
     return np.flatnonzero(mask) + lo
@@ -436,7 +445,7 @@ def analytic_timing(result, work, gpu) -> dict:
             # software rasterizer: a thread per submitted triangle loads its vertices, sets up and scans its
             # bounding box; a warp lasts as long as its largest box
             tris = submitted_triangles(pk, work) if pk.primitives is None else int(keys.max()) + 1
-            frags = np.unique(np.concatenate([g.thread_ids() for g in (plan.groups[i] for i in groups_of_pass[p])]))
+            frags = _union([plan.groups[i].thread_ids() for i in groups_of_pass[p]])
             r = gpu.raster
             box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
             setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * c.issue_cycles
