@@ -18,7 +18,7 @@ from gpusim.experiment.grid import expand
 from gpusim.experiment.runner import run_experiment
 from gpusim.report.experiment import _Report
 from gpusim.report.figures import MAX_PNG_BYTES
-from gpusim.report.tables import fmt
+from gpusim.report.tables import fmt, most_faithful
 from gpusim.schemes import scheme_names
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -130,3 +130,25 @@ def test_set_reaches_a_sweep_axis(tmp_path):
     assert exp.scene_sweeps[0].axes == {"objects.0.layers": [3]}
     with pytest.raises(ConfigError, match="'scene-sweeps.5' is not one of the file's 3"):
         load_experiment("stability-ci", ["scene-sweeps.5.set.objects.0.layers=[3]"])
+
+
+def test_a_refused_run_falls_back_to_its_most_faithful_finished_level():
+    rows = pd.DataFrame({"index": range(6), "setting": ["a", "a", "b", "b", "c", "c"],
+                         "config": ["k"] * 6, "fidelity": ["analytic", "sampled"] * 3,
+                         "status": ["ok", "ok", "ok", "failed", "failed", "failed"], "cycles": [1, 2, 3, 4, 5, 6]})
+    runs, fallback = most_faithful(rows)
+    assert runs["cycles"].tolist() == [2, 3] and fallback["setting"].tolist() == ["b"]
+
+
+def test_committed_stability_report_matches_the_experiment():
+    report = ROOT / "reports" / "stability"
+    text = (report / "index.md").read_text()
+    assert "## Stability: the schemes against the scene" in text and "![image error against simulated cycles" in text
+    for png in (report / "figures").glob("*.png"):
+        assert png.stat().st_size <= MAX_PNG_BYTES, png
+    t = pd.read_parquet(report / "results.parquet")
+    assert len(t) == len(expand(load_experiment("stability"))), \
+        "reports/stability is not the experiment's: run `gpusim run stability` and commit reports/stability"
+    assert (t["status"] != "pending").all()
+    # the only failures are the event model's refusals, whose analytic runs stand in
+    assert t.loc[t["status"] == "failed", "error"].str.contains("runner.max_operations").all()

@@ -194,10 +194,10 @@ def markdown(frame: pd.DataFrame, kinds: dict[str, str] | None = None, index: bo
     return "\n".join(lines)
 
 
-#: scheme stats that count fragments composited (or whose colour was kept) out of depth order; each stat's
-#: own description is in stats.parquet
+#: scheme stats that count fragments composited (or whose colour was kept) out of depth order, or merged
+#: with another before their order was known (mlab); each stat's own description is in stats.parquet
 MISORDER_STATS = ("misordered_pairs", "invalid_samples", "packing_order_inversions", "tie_blends",
-                  "colour_collisions")
+                  "colour_collisions", "merges")
 
 
 def most_faithful(labelled: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
