@@ -120,8 +120,10 @@ class TFSS(Scheme):
         frag_bits = np.zeros(n, np.int64)
         frag_bits[cand] = col.bits
         exact_fit = lze == "off" and self.section_bytes in (0, L * self.fragment_bytes)
-        stored_order = g.by_arrival[ez.stored[g.by_arrival]]
-        pl = place(pix, stored_order, n, L, None if exact_fit else frag_bits, None if exact_fit else 8 * M)
+        in_stored = ez.stored[g.by_arrival]
+        stored_order, stored_pix = g.by_arrival[in_stored], g.pix_by_arrival[in_stored]
+        pl = place(pix, stored_order, n, L, None if exact_fit else frag_bits, None if exact_fit else 8 * M,
+                   stored_pix)
 
         openers = np.flatnonzero(pl.opener)                 # submission order = allocation order
         n_s = len(openers)
@@ -153,8 +155,9 @@ class TFSS(Scheme):
                      lambda i, s: sec_of[kept[i]] * lt_bytes + pl.slot[kept[i]] * lt_field // 8, 1, dep=True)
 
         # read (Figure 3-9), one thread per pixel
-        read_order = stored_order[pl.kept[stored_order]]
-        rpix, rstart, rcount = read_runs(pix, read_order, P)
+        read = pl.kept[stored_order]
+        read_order = stored_order[read]
+        rpix, rstart, rcount = read_runs(pix, read_order, P, stored_pix[read])
         nsec = np.bincount(pix[openers], minlength=P)
         if self.read_scan == "all":
             plan.add(2, "load", "ssa_table", P, 1, lambda i, s: i * SA, SA)

@@ -71,8 +71,9 @@ class WeightFactor(Scheme):
         plan.add(0, "store", "pointer_memory", P, 1, lambda i, s: i * SA, SA)
         ez = early_z(trace, g, plan, 1, fb_bytes, unorm_rounder(bits))
 
-        stored_order = g.by_arrival[ez.stored[g.by_arrival]]
-        pl = place(pix, stored_order, n, D)
+        in_stored = ez.stored[g.by_arrival]
+        stored_order, stored_pix = g.by_arrival[in_stored], g.pix_by_arrival[in_stored]
+        pl = place(pix, stored_order, n, D, pix_sorted=stored_pix)
         dynamic = np.flatnonzero(pl.opener & (pl.chain > 0))    # submission order = allocation order
         n_a = len(dynamic)
         static = np.flatnonzero(pl.opener & (pl.chain == 0))
@@ -91,7 +92,7 @@ class WeightFactor(Scheme):
                  lambda i, s: section(pix[dynamic[i]], pl.chain[dynamic[i]] - 1) * SA, SA, dep=True)
         plan.add(1, "store", "m_buffer", kept, 1, lambda i, s: m_off[kept[i]], FB, dep=True)
 
-        rpix, rstart, rcount = read_runs(pix, stored_order, P)
+        rpix, rstart, rcount = read_runs(pix, stored_order, P, stored_pix)
         nsec = -(-rcount // D)
         if ez.uses_z:   # phase 2: the stored fragments meet the final opaque depth
             plan.add(2, "load", "z_buffer", rpix, 1, lambda i, s: rpix[i] * DEPTH_BYTES, DEPTH_BYTES)

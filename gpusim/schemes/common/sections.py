@@ -38,18 +38,21 @@ class Placement:
 
 
 def place(pix: np.ndarray, by_arrival: np.ndarray, n: int, capacity: int,
-          bits: np.ndarray | None = None, budget_bits: int | None = None) -> Placement:
+          bits: np.ndarray | None = None, budget_bits: int | None = None,
+          pix_sorted: np.ndarray | None = None) -> Placement:
     """Place fragments ``by_arrival`` (grouped by pixel, arrival order) into chained sections.
 
     ``n`` is the trace length (result arrays are indexed by fragment). Without
-    ``bits`` only the slot count limits a section.
+    ``bits`` only the slot count limits a section. ``pix_sorted`` is ``pix[by_arrival]``
+    when the caller has it.
     """
+    pix_sorted = pix[by_arrival] if pix_sorted is None else pix_sorted
     kept = np.zeros(n, bool)
     chain = np.full(n, -1, np.int64)
     slot = np.full(n, -1, np.int64)
     before = np.zeros(n, np.int64)
     if budget_bits is None or bits is None:
-        rank = rank_in_runs(pix[by_arrival])
+        rank = rank_in_runs(pix_sorted)
         kept[by_arrival] = True
         chain[by_arrival] = rank // capacity
         slot[by_arrival] = rank % capacity
@@ -59,7 +62,7 @@ def place(pix: np.ndarray, by_arrival: np.ndarray, n: int, capacity: int,
     kept[order] = True
     if len(order) == 0:
         return Placement(kept, chain, slot, before, 0)
-    start, _, active = runs_by_length(pix[order])
+    start, _, active = runs_by_length(pix_sorted[fits])
     runs = len(start)
     used_slots = np.full(runs, capacity, np.int64)     # "full": the first fragment opens a section
     used_bits = np.zeros(runs, np.int64)
@@ -101,10 +104,11 @@ class SectionIndex:
         return self.ids[self.first[pixel] + chain]
 
 
-def read_runs(pix: np.ndarray, kept_by_arrival: np.ndarray, pixel_count: int
+def read_runs(pix: np.ndarray, kept_by_arrival: np.ndarray, pixel_count: int, pix_sorted: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pixels holding fragments, where each one's run starts in ``kept_by_arrival``, and its length."""
-    counts = np.bincount(pix[kept_by_arrival], minlength=pixel_count)
+    """Pixels holding fragments, where each one's run starts in ``kept_by_arrival``, and its length
+    (``pix_sorted``: ``pix[kept_by_arrival]`` when the caller has it)."""
+    counts = np.bincount(pix[kept_by_arrival] if pix_sorted is None else pix_sorted, minlength=pixel_count)
     pixels = np.flatnonzero(counts)
     start = np.cumsum(counts) - counts
     return pixels, start[pixels], counts[pixels]
