@@ -289,8 +289,8 @@ def sweep(points: pd.DataFrame, x: str, xlabel: str, level: str, title: str, pat
         if scale == "symlog":
             ax.set_yscale("symlog", linthresh=1e-3)
             ax.set_ylim(bottom=0)
-        else:
-            ax.set_yscale(scale)
+        elif scale != "log" or (points[column].to_numpy(dtype=float) > 0).any():
+            ax.set_yscale(scale)                 # a log axis needs a positive value (a tiny sweep may time 0)
         if numeric and min(values) > 0 and max(values) >= 10 * min(values):
             ax.set_xscale("log")
             ax.set_xticks(values, [f"{v:g}" for v in values])
