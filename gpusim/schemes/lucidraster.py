@@ -141,15 +141,15 @@ class LucidRaster(Scheme):
         mean_z = np.bincount(tb_of, weights=trace.z.astype(np.float64)) / np.bincount(tb_of)
         ckey = depth_key(np.clip(mean_z, 0.0, 1.0).astype(np.float32)) >> np.uint32(32 - DEPTH_BITS)
         frag_rank, by_arrival = sorted_arrival(pix, ckey, tb_block, tb_tri, tb_of)
-        emitted, steps = emit_order(pix, g.key, by_arrival, self.depth_filter, return_steps=True)
+        emitted, steps, ep, ek = emit_order(pix, g.key, by_arrival, self.depth_filter, return_steps=True,
+                                            return_keys=True)
 
         skipped = np.zeros(n, bool)
         if self.alpha_threshold and n:
             skipped = self._threshold_skips(trace, g, grid, half_block, frag_rank, by_arrival, emitted, steps)
             if skipped.any():
                 by_arrival = by_arrival[~skipped[by_arrival]]
-                emitted = emit_order(pix, g.key, by_arrival, self.depth_filter)
-        ep, ek = pix[emitted], g.key[emitted]
+                emitted, ep, ek = emit_order(pix, g.key, by_arrival, self.depth_filter, return_keys=True)
         descent = np.zeros(len(ep), bool)
         descent[1:] = (ep[1:] == ep[:-1]) & (ek[1:] < ek[:-1])
         invalid = ep[descent]                     # pixels ascending

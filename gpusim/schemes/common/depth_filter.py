@@ -15,27 +15,29 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.common.arrays import lex_order
+from gpusim.schemes.common.arrays import lex_sorted
 
 _NONE = np.iinfo(np.int64).max
 
 
 def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacity: int,
-               return_steps: bool = False):
+               return_steps: bool = False, return_keys: bool = False):
     """Fragment indices in the order the queue emits them, grouped by pixel (ascending).
 
     ``by_arrival`` lists fragment indices grouped by pixel in arrival order.
     After the last arrival the queue drains nearest first. With
     ``return_steps`` also returns, per emitted entry, the 0-based arrival rank
-    whose arrival pushed it out (``count + k`` for the k-th entry drained).
+    whose arrival pushed it out (``count + k`` for the k-th entry drained); with
+    ``return_keys`` then the pixel and the key of each emitted entry.
     """
     n = len(by_arrival)
     if n == 0:
         empty = np.zeros(0, np.int64)
-        return (empty, empty) if return_steps else empty
+        return (empty,) * (1 + return_steps + 2 * return_keys) if return_steps or return_keys else empty
     pix_sorted = pix[by_arrival]
     start_c, count_c, active = runs_by_length(pix_sorted)
-    key_sorted = key[by_arrival].astype(np.int64)      # in arrival order
+    arrived_key = key[by_arrival]                      # in arrival order
+    key_sorted = arrived_key.astype(np.int64)
     # queue entries: (key << 32 | position) so argmin = nearest, then earliest; _NONE = empty slot
     queue = np.full((len(start_c), capacity + 1), _NONE, np.int64)
     emitted_pos = np.empty(n, np.int64)
@@ -62,8 +64,8 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
     m_rest = len(drained)
     emitted_pos[out:out + m_rest] = drained
     emitted_step[out:out + m_rest] = count_c[rows] + np.broadcast_to(np.arange(capacity), rest.shape)[valid]
-    pixel_of = pix_sorted[emitted_pos]
-    order = lex_order(pixel_of, emitted_step)
-    if return_steps:
-        return by_arrival[emitted_pos[order]], emitted_step[order]
-    return by_arrival[emitted_pos[order]]
+    order, emitted_pix = lex_sorted(pix_sorted[emitted_pos], emitted_step)
+    at = emitted_pos[order]
+    out = (by_arrival[at],) + ((emitted_step[order],) if return_steps else ()) + \
+        ((emitted_pix, arrived_key[at]) if return_keys else ())
+    return out if len(out) > 1 else out[0]
