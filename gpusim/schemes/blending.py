@@ -48,7 +48,7 @@ from gpusim.errors import GpusimError
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, PREMULTIPLY, WBOIT_RESOLVE, WBOIT_WEIGHT
-from gpusim.schemes.common.arrays import lex_order
+from gpusim.schemes.common.arrays import lex_sorted, put_rows
 from gpusim.schemes.common.fold import fold
 from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, rounder
@@ -70,15 +70,17 @@ def depth_tested_pass(trace, g: PixelGroups, plan: OpPlan, pass_index: int, colo
     colour = np.empty((P, 3), np.float32)
     colour[:] = trace.background.astype(np.float32)
     if len(op_idx):
-        by_pix = op_idx[lex_order(pix[op_idx])]                # op_idx ascends: submission order per pixel
-        pix_sorted, key_sorted = pix[by_pix], g.key[by_pix]
+        perm, pix_sorted = lex_sorted(pix[op_idx])              # op_idx ascends: submission order per pixel
+        by_pix = op_idx[perm]
+        key_sorted = g.key[by_pix]
         # colour stores: opaque fragments that pass LESS against the earlier opaque ones
         passes = key_sorted < segment_running_min_before(pix_sorted, key_sorted)
-        writes = by_pix[passes]
+        writes, write_pix, write_key = by_pix[passes], pix_sorted[passes], key_sorted[passes]
         # the last write at a pixel is its nearest opaque fragment (first submitted among equals)
-        winners = writes[np.r_[pix[writes][1:] != pix[writes][:-1], True]]
-        zbuf[pix[winners]] = g.key[winners]
-        colour[pix[winners]] = colour_round(np.take(trace.rgba[:, :3], winners, axis=0))
+        last = np.r_[write_pix[1:] != write_pix[:-1], True]
+        winners, winner_pix = writes[last], write_pix[last]
+        zbuf[winner_pix] = write_key[last]
+        put_rows(colour, winner_pix, colour_round(np.take(trace.rgba[:, :3], winners, axis=0)))
     else:
         writes = op_idx
     plan.add(pass_index, "depth_test", "depth_buffer", op_idx, 1, lambda i, s: pix[op_idx[i]] * DEPTH_BYTES,
