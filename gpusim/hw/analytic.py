@@ -43,6 +43,7 @@ from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_trian
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
+from gpusim.opplan import ThreadRange
 
 # the units an operation goes to from the core (analytic estimates report memory traffic as DRAM's)
 MEM, ATOMIC, ROP, SCOREBOARD = "coalescer", "atomic", "rop", "scoreboard"
@@ -56,7 +57,9 @@ def _lane_keys(parts: list) -> np.ndarray:
     first = parts[0]
     if all(p is first or (len(p) == len(first) and np.array_equal(p, first)) for p in parts[1:]):
         return first
-    return _union(parts)
+    lo, hi = min(int(p[0]) for p in parts if len(p)), max(int(p[-1]) for p in parts if len(p))
+    whole = next((p for p in parts if len(p) == hi + 1 - lo), None)     # one group on every key of the range
+    return whole if whole is not None else _union(parts)
 
 
 def _union(parts: list) -> np.ndarray:
@@ -72,14 +75,38 @@ def _union(parts: list) -> np.ndarray:
     return np.flatnonzero(mask) + lo
 
 
+WHOLE_GROUPS = 2      # lane information of whole groups kept from pass to pass (depth peeling's every-pass loads)
+
+
+def _thread_ids(plan) -> list[np.ndarray]:
+    """Each group's thread ids, made once: the groups over ``0..n-1`` share one ``arange`` (depth peeling's
+    groups over every fragment would make one per group and pass)."""
+    ranges: dict[int, np.ndarray] = {}
+    out = []
+    for g in plan.groups:
+        if isinstance(g.thread, ThreadRange):
+            n = len(g.thread)
+            out.append(ranges[n] if n in ranges else ranges.setdefault(n, g.thread_ids()))
+        else:
+            out.append(g.thread_ids())
+    return out
+
+
 class _QuadMemo:
     """Quads of a pass's fragments, computed once per distinct set of fragments (depth peeling's thousands of
     passes run over the same ones)."""
 
     def __init__(self):
         self.seen: dict[tuple, int] = {}
+        self.last: tuple = (None, 0)
 
     def quads(self, keys: np.ndarray, work) -> int:
+        if keys is self.last[0]:               # the same lanes' keys as the pass before
+            return self.last[1]
+        self.last = (keys, self._quads(keys, work))
+        return self.last[1]
+
+    def _quads(self, keys: np.ndarray, work) -> int:
         fingerprint = (len(keys), int(keys[0]), int(keys[-1]), int(keys.sum()), int((keys * keys).sum()))
         got = self.seen.get(fingerprint)
         if got is None:
@@ -103,10 +130,11 @@ def _hottest(addr: np.ndarray) -> int:
 
 def _warp_max(values: np.ndarray, ws: int) -> np.ndarray:
     """Per warp of ``ws`` consecutive lanes, the largest value."""
-    pad = -len(values) % ws
-    if pad:
-        values = np.concatenate([values, np.zeros(pad, values.dtype)])
-    return values.reshape(-1, ws).max(axis=1)
+    full = len(values) - len(values) % ws
+    head = values[:full].reshape(-1, ws).max(axis=1)
+    if full == len(values):
+        return head
+    return np.append(head, max(values[full:].max(), values.dtype.type(0)))    # a partial warp, padded with 0
 
 
 class _Packing:
@@ -285,6 +313,7 @@ def analytic_timing(result, work, gpu) -> dict:
     used: list[set] = [set() for _ in range(n_pass)]
     # where each group's operations fall: per pass, the threads (None: all) issuing them
     placement = [_group_passes(g) for g in plan.groups]
+    ids = _thread_ids(plan)
     groups_of_pass: list[list[int]] = [[] for _ in range(n_pass)]
     for gi, (_, _, where) in enumerate(placement):
         for p in where:
@@ -293,6 +322,7 @@ def analytic_timing(result, work, gpu) -> dict:
     overhead = pass_overhead_cycles(gpu)      # the driver issues each pass
     quad_memo = _QuadMemo()                   # passes over the same fragments (depth peeling's) share their quads
     timed: dict[tuple, tuple] = {}            # a pass's key -> the last pass timed with it, its groups' threads
+    whole_groups: list = []                   # the last groups met whole: (threads, triangle mapping, lane info)
     for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
         if pk.kind == "flush":
             cyc = flush_cycles(c, -(-work.width * work.height // ws)) + overhead
@@ -313,8 +343,11 @@ def analytic_timing(result, work, gpu) -> dict:
         pass_keys: list = []                  # the lane keys of each group in the pass
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
         packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
-        lane_cache: list = []                 # [(threads, (lanes, first key, keys, threads per lane, present,
-                                              #             warp max))]
+        lane_cache: list = []                 # [(threads, (lanes, first key, key range, threads per lane,
+                                              #             present, warp max, lane keys))]
+        triangles = thread_mapping(gpu, pk) == "triangle"
+        if packing.warp is None:              # a whole group's lanes, as the last passes over it had them
+            lane_cache = [(th, v) for th, tri, v in whole_groups if tri == triangles]
         for gi in groups_of_pass[p]:          # in program order
             g = plan.groups[gi]
             li, cnt, where = placement[gi]
@@ -322,7 +355,7 @@ def analytic_timing(result, work, gpu) -> dict:
             if isinstance(sel, _StillIssuing):
                 sel = sel()
             n = len(g.thread)
-            thread = g.thread_ids()
+            thread = ids[gi]
             compute = g.is_compute
             cls, produces = (None, False) if compute else (entry_unit(g.op), g.op in PRODUCES)
             nb = g.bytes if not callable(g.bytes) else None
@@ -335,18 +368,22 @@ def analytic_timing(result, work, gpu) -> dict:
             # per lane: the group's threads it runs (several fragments of one triangle); groups of one pass on
             # the same threads (a thread's successive operations) share it
             cached = lane_cache if sel is None else []
-            got = next((v for th, v in cached if len(th) == n and np.array_equal(th, thread)), None)
+            got = next((v for th, v in cached if th is thread or (len(th) == n and np.array_equal(th, thread))),
+                       None)
             if got is None:
-                if thread_mapping(gpu, plan.passes[p]) == "triangle":
+                if triangles:
                     lanes = work.frag_prim[lanes]
                 lo = int(lanes.min())           # lane keys from lo (a batch's fragments are a slice of them)
                 size = int(lanes.max()) + 1 - lo
                 threads_in = np.bincount(lanes - lo, minlength=size)
                 present = np.flatnonzero(threads_in)
-                got = (lanes, lo, size, threads_in, present, packing.warp_max(threads_in[present], lo + present).sum())
+                got = (lanes, lo, size, threads_in, present, packing.warp_max(threads_in[present], lo + present).sum(),
+                       lo + present)
                 cached.append((thread, got))
-            lanes, lo, size, threads_in, present, warp_threads = got
-            pass_keys.append(lo + present)
+                if sel is None and packing.warp is None:
+                    whole_groups = [(thread, triangles, got)] + whole_groups[:WHOLE_GROUPS - 1]
+            lanes, lo, size, threads_in, present, warp_threads, keys = got
+            pass_keys.append(keys)
             c0 = int(counts[0]) if len(counts) else 0
             uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
             per_lane = threads_in * c0 if uniform else np.bincount(lanes - lo, weights=counts, minlength=size)
@@ -445,7 +482,7 @@ def analytic_timing(result, work, gpu) -> dict:
             # software rasterizer: a thread per submitted triangle loads its vertices, sets up and scans its
             # bounding box; a warp lasts as long as its largest box
             tris = submitted_triangles(pk, work) if pk.primitives is None else int(keys.max()) + 1
-            frags = _union([plan.groups[i].thread_ids() for i in groups_of_pass[p]])
+            frags = _union([ids[i] for i in groups_of_pass[p]])
             r = gpu.raster
             box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
             setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * c.issue_cycles
