@@ -37,9 +37,11 @@ class RunnerConfig:
     max_cycles: int = param(10**12, unit="cycles", doc="stop with an error past this many cycles", min=1)
     no_progress_cycles: int = param(1_000_000, unit="cycles", doc="fail with a diagnosis when no warp "
                                     "instruction completes for this long", min=1)
-    max_operations: int = param(50_000_000, unit="operations", doc="refuse to lower a run of more operations "
-                                "than this (the event model holds about 80 bytes per operation: 50 M is about "
-                                "4 GiB); the analytic level has no such limit", min=1)
+    max_operations: int = param(50_000_000, unit="operations", doc="the most operations the event model "
+                                "lowers at once (about 80 bytes each: 50 M is about 4 GiB); the full level "
+                                "replays a larger run a chunk of passes at a time, each within it (refused: a "
+                                "pass over it, more than 64 operations per fragment, an L2), the sampled level "
+                                "refuses it; the analytic level has no such limit", min=1)
     trace_every: int = param(0, unit="cycles", doc="print a one-line trace of every unit's state to stderr "
                              "every this many cycles while a pass runs (0: never); for debugging a model", min=0)
     workers: int = param(0, unit="processes", doc="processes the event model replays passes in (passes are "
