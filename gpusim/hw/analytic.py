@@ -343,8 +343,9 @@ def analytic_timing(result, work, gpu) -> dict:
         pass_keys: list = []                  # the lane keys of each group in the pass
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
         packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
-        lane_cache: list = []                 # [(threads, (lanes, first key, key range, threads per lane,
-                                              #             present, warp max, lane keys))]
+        lane_cache: list = []                 # [(threads, (lanes, first key, key range, threads per present
+                                              #   lane, present lanes from the first, warp max, lane keys,
+                                              #   whether each lane runs one thread))]
         triangles = thread_mapping(gpu, pk) == "triangle"
         if packing.warp is None:              # a whole group's lanes, as the last passes over it had them
             lane_cache = [(th, v) for th, tri, v in whole_groups if tri == triangles]
@@ -375,20 +376,32 @@ def analytic_timing(result, work, gpu) -> dict:
                     lanes = work.frag_prim[lanes]
                 lo = int(lanes.min())           # lane keys from lo (a batch's fragments are a slice of them)
                 size = int(lanes.max()) + 1 - lo
-                threads_in = np.bincount(lanes - lo, minlength=size)
-                present = np.flatnonzero(threads_in)
-                got = (lanes, lo, size, threads_in, present, packing.warp_max(threads_in[present], lo + present).sum(),
-                       lo + present)
+                # the lanes present (offsets from lo, ascending) and the threads each runs: a thread per lane when
+                # the threads are ascending lanes (a fragment or pixel each), no pass over the whole key range
+                distinct = len(lanes) < 2 or bool((lanes[1:] > lanes[:-1]).all())
+                if distinct:
+                    present, threads_in, keys = lanes - lo, np.ones(len(lanes), np.int64), lanes
+                else:
+                    threads_in = np.bincount(lanes - lo, minlength=size)
+                    present = np.flatnonzero(threads_in)
+                    threads_in, keys = threads_in[present], lo + present
+                got = (lanes, lo, size, threads_in, present, packing.warp_max(threads_in, keys).sum(), keys, distinct)
                 cached.append((thread, got))
                 if sel is None and packing.warp is None:
                     whole_groups = [(thread, triangles, got)] + whole_groups[:WHOLE_GROUPS - 1]
-            lanes, lo, size, threads_in, present, warp_threads, keys = got
+            lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
             pass_keys.append(keys)
             c0 = int(counts[0]) if len(counts) else 0
             uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
-            per_lane = threads_in * c0 if uniform else np.bincount(lanes - lo, weights=counts, minlength=size)
+            # per present lane: its operations
+            if uniform:
+                per_lane = threads_in if c0 == 1 else threads_in * c0
+            elif distinct:
+                per_lane = np.asarray(counts, np.float64)
+            else:
+                per_lane = np.bincount(lanes - lo, weights=counts, minlength=size)[present]
             # warp instructions: lanes in order, each warp issues its busiest lane's count
-            busiest = warp_threads * c0 if uniform else packing.warp_max(per_lane[present], lo + present).sum()
+            busiest = warp_threads * c0 if uniform else packing.warp_max(per_lane, keys).sum()
             if compute:
                 alu[p] += busiest * c.issue_cycles
             else:
@@ -431,12 +444,14 @@ def analytic_timing(result, work, gpu) -> dict:
                                                         gpu.scoreboard.granularity)))
             # dependent chains per lane: every operation issues; a dependent producer waits for each result,
             # and the first dependent operation after a producer waits once per thread
-            add = per_lane * (c.issue_cycles if compute else cost)
+            # (the same for every lane when each runs one thread with the same operations: a number)
+            same = uniform and distinct
+            add = (c0 if same else per_lane) * (c.issue_cycles if compute else cost)
             lp = last_producer
             if g.dep and produces:
-                add += per_lane * lat[cls]
+                add += (c0 if same else per_lane) * lat[cls]
             elif g.dep and lp is not None and not waited:
-                add += threads_in * lat[lp]
+                add += (1 if same else threads_in) * lat[lp]
             base, have = chain if chain is not None else (lo, np.zeros(0))
             if lo < base or lo + size > base + len(have):
                 new_base = min(base, lo)
@@ -444,7 +459,10 @@ def analytic_timing(result, work, gpu) -> dict:
                 grown[base - new_base:base - new_base + len(have)] = have
                 base, have = new_base, grown
                 chain = (base, have)
-            have[lo - base:lo - base + size] += add
+            if len(present) == size:            # every key of the range
+                have[lo - base:lo - base + size] += add
+            else:
+                have[lo - base + present] += add
             if produces:
                 last_producer, waited = cls, False
             elif g.dep:
