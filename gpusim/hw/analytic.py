@@ -192,11 +192,11 @@ class _StillIssuing:
     the pass is reached (memory grows with the threads, not threads x passes); the sets are nested (fewer as
     ``s`` grows), so two of one group with the same size are the same set."""
 
-    def __init__(self, count: np.ndarray, ascending: np.ndarray, s: int):
-        self.count, self.ascending, self.s = count, ascending, s
+    def __init__(self, count: np.ndarray, sizes: np.ndarray, s: int):
+        self.count, self.sizes, self.s = count, sizes, s     # sizes[s]: threads with more than s ops
 
     def size(self) -> int:
-        return len(self.ascending) - int(np.searchsorted(self.ascending, self.s, side="right"))
+        return int(self.sizes[self.s])
 
     def __call__(self) -> np.ndarray:
         return np.flatnonzero(self.count > self.s)
@@ -212,8 +212,9 @@ def _group_passes(g):
         if int(count.min()) == int(count.max()):
             where = {int(g.seq_pass[s]): None for s in range(int(count.max()))}
         else:
-            ascending = np.sort(count)
-            where = {int(g.seq_pass[s]): _StillIssuing(count, ascending, s) for s in range(int(count.max()))}
+            top = int(count.max())
+            sizes = len(count) - np.searchsorted(np.sort(count), np.arange(top), side="right")
+            where = {int(g.seq_pass[s]): _StillIssuing(count, sizes, s) for s in range(top)}
         return np.arange(n), np.ones(n, np.int64), where
     if g.pass_fn is not None:
         gp, li, cnt = _expand_pass(g, n)
@@ -343,6 +344,7 @@ def analytic_timing(result, work, gpu) -> dict:
         pass_keys: list = []                  # the lane keys of each group in the pass
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
         packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
+        still: dict = {}                      # the threads still issuing, by count array and op
         lane_cache: list = []                 # [(threads, (lanes, first key, key range, threads per present
                                               #   lane, present lanes from the first, warp max, lane keys,
                                               #   whether each lane runs one thread))]
@@ -353,14 +355,20 @@ def analytic_timing(result, work, gpu) -> dict:
             g = plan.groups[gi]
             li, cnt, where = placement[gi]
             sel = where[p]
-            if isinstance(sel, _StillIssuing):
-                sel = sel()
+            if isinstance(sel, _StillIssuing):   # groups over one count array (views of it) share the threads
+                memo = (sel.count.__array_interface__["data"][0], sel.count.shape, sel.count.strides, sel.s)
+                sel = still[memo] if memo in still else still.setdefault(memo, sel())
             n = len(g.thread)
             thread = ids[gi]
             compute = g.is_compute
             cls, produces = (None, False) if compute else (entry_unit(g.op), g.op in PRODUCES)
             nb = g.bytes if not callable(g.bytes) else None
-            lanes_sel, counts = (li, cnt) if sel is None else (li[sel], cnt[sel])
+            if sel is None:
+                lanes_sel, counts = li, cnt
+            elif g.seq_pass is not None:          # lanes 0..n-1, an operation each (_group_passes)
+                lanes_sel, counts = sel, cnt[:len(sel)]
+            else:
+                lanes_sel, counts = li[sel], cnt[sel]
             lanes = thread if sel is None else thread[lanes_sel]
             if compute:                       # ALU work: its instructions stand for the operation count
                 counts = np.asarray(g.instructions)[lanes_sel]
