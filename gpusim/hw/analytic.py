@@ -345,16 +345,18 @@ def analytic_timing(result, work, gpu) -> dict:
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
         packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
         still: dict = {}                      # the threads still issuing, by count array and op
+        positions: dict = {}                  # present lanes' positions in the chain array
         lane_cache: list = []                 # [(threads, (lanes, first key, key range, threads per present
                                               #   lane, present lanes from the first, warp max, lane keys,
                                               #   whether each lane runs one thread))]
         triangles = thread_mapping(gpu, pk) == "triangle"
         if packing.warp is None:              # a whole group's lanes, as the last passes over it had them
-            lane_cache = [(th, v) for th, tri, v in whole_groups if tri == triangles]
+            lane_cache = [(th, None, v) for th, tri, v in whole_groups if tri == triangles]
         for gi in groups_of_pass[p]:          # in program order
             g = plan.groups[gi]
             li, cnt, where = placement[gi]
             sel = where[p]
+            memo = None
             if isinstance(sel, _StillIssuing):   # groups over one count array (views of it) share the threads
                 memo = (sel.count.__array_interface__["data"][0], sel.count.shape, sel.count.strides, sel.s)
                 sel = still[memo] if memo in still else still.setdefault(memo, sel())
@@ -369,17 +371,18 @@ def analytic_timing(result, work, gpu) -> dict:
                 lanes_sel, counts = sel, cnt[:len(sel)]
             else:
                 lanes_sel, counts = li[sel], cnt[sel]
-            lanes = thread if sel is None else thread[lanes_sel]
             if compute:                       # ALU work: its instructions stand for the operation count
                 counts = np.asarray(g.instructions)[lanes_sel]
             else:
                 used[p].add(cls)
             # per lane: the group's threads it runs (several fragments of one triangle); groups of one pass on
             # the same threads (a thread's successive operations) share it
-            cached = lane_cache if sel is None else []
-            got = next((v for th, v in cached if th is thread or (len(th) == n and np.array_equal(th, thread))),
-                       None)
+            # (whole groups, or seq_pass groups' threads still issuing, which are lanes 0..n-1 of theirs)
+            cached = lane_cache if sel is None or memo is not None else []
+            got = next((v for th, key, v in cached
+                        if key == memo and (th is thread or (len(th) == n and np.array_equal(th, thread)))), None)
             if got is None:
+                lanes = thread if sel is None else thread[lanes_sel]
                 if triangles:
                     lanes = work.frag_prim[lanes]
                 lo = int(lanes.min())           # lane keys from lo (a batch's fragments are a slice of them)
@@ -394,7 +397,7 @@ def analytic_timing(result, work, gpu) -> dict:
                     present = np.flatnonzero(threads_in)
                     threads_in, keys = threads_in[present], lo + present
                 got = (lanes, lo, size, threads_in, present, packing.warp_max(threads_in, keys).sum(), keys, distinct)
-                cached.append((thread, got))
+                cached.append((thread, memo, got))
                 if sel is None and packing.warp is None:
                     whole_groups = [(thread, triangles, got)] + whole_groups[:WHOLE_GROUPS - 1]
             lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
@@ -469,8 +472,11 @@ def analytic_timing(result, work, gpu) -> dict:
                 chain = (base, have)
             if len(present) == size:            # every key of the range
                 have[lo - base:lo - base + size] += add
-            else:
-                have[lo - base + present] += add
+            else:                               # (groups on the same lanes share the positions)
+                held_at = positions.get((id(present), lo - base))
+                if held_at is None or held_at[0] is not present:
+                    held_at = positions[id(present), lo - base] = (present, present + (lo - base))
+                have[held_at[1]] += add
             if produces:
                 last_producer, waited = cls, False
             elif g.dep:
