@@ -249,9 +249,9 @@ def test_kbuffer_peel_and_sort_blend(random_trace):
     # one fragment per primitive: the centroid sort makes the stream sorted, so k = 1 blending is exact
     sorted_blend = run("kbuffer", random_trace, k=1, mode="sort-blend", order="centroid")
     exact(sorted_blend, random_trace)
-    assert sorted_blend.stats["misordered_pairs"].value == 0
+    assert sorted_blend.stats["misordered_pairs"].value == 0 and sorted_blend.stats["max_disorder"].value == 0
     unsorted = run("kbuffer", random_trace, k=1, mode="sort-blend")
-    assert unsorted.stats["misordered_pairs"].value > 0
+    assert unsorted.stats["misordered_pairs"].value > 0 and unsorted.stats["max_disorder"].value > 0
     batched = run("kbuffer", random_trace, batch=1000)
     assert batched.stats["batches"].value == 5
     assert sum(p.kind == "flush" for p in batched.passes) == 4
@@ -267,6 +267,33 @@ def test_kbuffer_sort_blend_is_exact_on_k_nearly_sorted_input():
         z[i:i + 3] = z[i:i + 3][::-1]                    # displaced by at most 2 <= k - 1
     t = make_trace(np.zeros(n), np.zeros(n), z, rgba=rng.random((n, 4)), width=1, height=1)
     exact(run("kbuffer", t, k=k, mode="sort-blend"), t)
+
+
+def test_kbuffer_max_disorder_counts_positions_out_of_depth_order():
+    from gpusim.schemes.kbuffer import max_disorder
+    # the function on hand-made sequences: one pixel of 5 distinct depths, reversed, is 4 out of place at the ends
+    pix, key = np.zeros(5, np.int64), np.arange(5, dtype=np.uint32)
+    assert max_disorder(pix, key, pix, key) == 0
+    assert max_disorder(pix, key, pix, key[::-1]) == 4
+    assert max_disorder(pix, key, pix, key[[1, 0, 2, 3, 4]]) == 1
+    # equal depths in any order are in place; a second pixel's sequence is measured on its own
+    two_pix = np.array([0, 0, 0, 1, 1, 1], np.int64)
+    sorted_keys = np.array([3, 3, 7, 1, 2, 9], np.uint32)
+    assert max_disorder(two_pix, sorted_keys, two_pix, np.array([3, 3, 7, 9, 2, 1], np.uint32)) == 2
+    assert max_disorder(two_pix, sorted_keys, two_pix, np.array([7, 3, 3, 1, 2, 9], np.uint32)) == 2
+    assert max_disorder(two_pix[:3], sorted_keys[:3], two_pix[:3], sorted_keys[:3]) == 0
+    with pytest.raises(ValueError, match="same fragments in both orders"):
+        max_disorder(pix, key, pix[:4], key[:4])
+    # the scheme: a stream arriving far to near through k = 1 comes out as arrivals 1, 2, 3, 4, then 0 (drained):
+    # arrival 1 is composited first but is 4th nearest (|0 - 3|), arrival 4 fourth but nearest (|3 - 0|)
+    far_to_near = make_trace(np.zeros(5), np.zeros(5), [0.9, 0.7, 0.5, 0.3, 0.1], width=1, height=1)
+    assert run("kbuffer", far_to_near, k=1, mode="sort-blend").stats["max_disorder"].value == 3
+    assert run("kbuffer", far_to_near, k=5, mode="sort-blend").stats["max_disorder"].value == 0
+    near_to_far = make_trace(np.zeros(5), np.zeros(5), [0.1, 0.3, 0.5, 0.7, 0.9], width=1, height=1)
+    assert run("kbuffer", near_to_far, k=1, mode="sort-blend").stats["max_disorder"].value == 0
+    ties = make_trace(np.zeros(4), np.zeros(4), [0.5] * 4, width=1, height=1)
+    assert run("kbuffer", ties, k=1, mode="sort-blend").stats["max_disorder"].value == 0
+    assert "max_disorder" not in run("kbuffer", ties, k=1).stats          # peel mode composites in depth order
 
 
 def test_stencil_routing_keeps_the_first_k_to_arrive(random_trace):

@@ -17,7 +17,9 @@ Modes:
   nearest of the k + 1 is composited front to back into an RGBA32F framebuffer
   (also read and written by every fragment, as an MRT) and leaves; the resolve
   composites what remains, nearest first. Exact for a k-nearly-sorted input;
-  otherwise fragments are composited out of order (``misordered_pairs``).
+  otherwise fragments are composited out of order (``misordered_pairs``;
+  ``max_disorder``, Table 2's "Max Error": how far the composited sequence of
+  a pixel strays from depth order, see :func:`max_disorder`).
 
 Heuristics of section 3.2, applied to the trace first: ``order = centroid``
 sorts primitives front to back by centroid depth (see gpusim.schemes.common.reorder);
@@ -60,7 +62,7 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, composite_stored, register
 from gpusim.schemes.common.alu import COMPOSITE, compare_exchange
-from gpusim.schemes.common.arrays import entry_index, smallest_per_pixel
+from gpusim.schemes.common.arrays import entry_index, pixel_key, smallest_per_pixel
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.kbuffer_replay import make_replay
@@ -134,6 +136,8 @@ class KBuffer(Scheme):
             same = pix[order][1:] == pix[order][:-1]
             stats["misordered_pairs"] = Stat(int(np.count_nonzero(same & (np.diff(z) < 0))), "fragment pairs",
                                              "consecutively composited fragments in the wrong depth order")
+            stats["max_disorder"] = Stat(max_disorder(g.pix_by_depth, g.key_by_depth, pix[order], g.key[order]),
+                                         "positions", MAX_DISORDER_DOC)
             used = int(np.minimum(g.count, k).sum())
         else:
             order = smallest_per_pixel(pix, g.key, k, order=g.by_depth)
@@ -152,6 +156,36 @@ class KBuffer(Scheme):
                             overflowed_pixels=0 if blend else int(np.count_nonzero(g.count > k)),
                             lists=CapturedLists(pix[order], submission[order]), stats=stats,
                             submission=submission, extras=extras)
+
+
+MAX_DISORDER_DOC = ("largest displacement of a composited fragment in its pixel's sequence from depth order "
+                    "(seed 004 Table 2's Max Error): max over fragments of the distance from its composited "
+                    "position to the range of positions its depth holds in the sorted sequence (equal depths "
+                    "in any order are in place)")
+
+
+def max_disorder(pix_sorted: np.ndarray, key_sorted: np.ndarray, pix_emitted: np.ndarray,
+                 key_emitted: np.ndarray) -> int:
+    """The largest number of positions a fragment is out of place in its pixel's composited sequence.
+
+    ``pix_sorted``, ``key_sorted``: every fragment's pixel and depth key, grouped by pixel ascending, nearest
+    first; ``pix_emitted``, ``key_emitted``: the same fragments in the order they were composited, grouped by
+    pixel ascending (so a pixel's sequence starts at the same index in both). A fragment at position i of its
+    pixel's composited sequence whose depth occupies positions lo..hi of the sorted sequence (lo fragments of
+    the pixel strictly nearer, hi + 1 nearer or equal) is max(0, lo - i, i - hi) positions out of place: equal
+    depths in any order count as in order. 0 for a sorted sequence, m - 1 for m distinct depths reversed.
+    """
+    if len(pix_emitted) != len(pix_sorted):
+        raise ValueError(f"max_disorder: {len(pix_emitted)} composited fragments against {len(pix_sorted)} sorted; "
+                         "pass the same fragments in both orders")
+    if not len(pix_sorted):
+        return 0
+    sorted_words = pixel_key(pix_sorted, key_sorted)
+    words = pixel_key(pix_emitted, key_emitted)
+    position = np.arange(len(words), dtype=np.int64)
+    lo = np.searchsorted(sorted_words, words, side="left").astype(np.int64)
+    hi = np.searchsorted(sorted_words, words, side="right").astype(np.int64) - 1
+    return int(np.maximum(np.maximum(lo - position, position - hi), 0).max())
 
 
 def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count: int, k: int, colour_format: str,
