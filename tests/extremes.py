@@ -105,3 +105,13 @@ def packed_depth_collisions(runs: int, run: int = 4, seed: int = 0) -> FragmentT
     z = (np.repeat(base, run) + np.tile(np.arange(run, dtype=np.uint32), runs)).view(np.float32)
     order = rng.permutation(len(z))
     return build(np.zeros(len(z), np.int64), z[order], 1, 1, 0.5, seed)
+
+
+def stored_as(trace: FragmentTrace, entry: str, alpha: float) -> FragmentTrace:
+    """``trace`` with each fragment's colour what a k-buffer entry of format ``entry`` gives its resolve
+    (gpusim.schemes.common.kbuffer_entries): ``rgbz`` its RGB, ``z`` the grey 1 - z of its depth, both at
+    ``alpha``, none opaque. A scheme storing ``rgbz`` or ``z`` entries must give the image its model gives this
+    trace with its float32 colours."""
+    rgb = trace.rgba[:, :3] if entry == "rgbz" else np.repeat(np.clip(1 - trace.z, 0, 1)[:, None], 3, axis=1)
+    return make_trace(trace.x, trace.y, trace.z, np.c_[rgb, np.full(len(trace), alpha)], width=trace.width,
+                      height=trace.height, prim=trace.prim, meta=dict(trace.meta))

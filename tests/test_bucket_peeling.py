@@ -193,6 +193,30 @@ def test_multipass_kbuffer_loses_equal_depths_cut_by_a_pass():
     assert np.allclose(res.image[0, 0], composite_of(t, [1, 0, 3])[0, 0], atol=1e-6)
 
 
+@pytest.mark.parametrize("entry,k,slots", [("rgbz", 4, 4), ("z", 16, 4), ("z", 4, 1)])
+def test_multipass_kbuffer_entry_formats(deep, entry, k, slots):
+    """RGBZ and Z-only entries (seed 004 Table 1) peel the same fragments in the same passes; the buffer is k
+    RGBA32F texels (RGBZ) or ceil(k / 4) (Z-only), each read or write moving one; the image is the stored
+    entries' (the RGB, or the grey 1 - z, at the uniform alpha), the same when replayed without a hazard."""
+    res = run("multipass-kbuffer", deep, k=k, entry=entry, uniform_alpha=0.5)
+    ref = run("multipass-kbuffer", deep, k=k)
+    assert res.geometry_passes == ref.geometry_passes and np.array_equal(res.lists.fragment, ref.lists.fragment)
+    P = deep.pixel_count
+    assert res.footprint["kbuffer"] == P * slots * 16
+    got, want = res.accesses["kbuffer"], ref.accesses["kbuffer"]
+    assert {op: got[op] * k for op in got} == {op: want[op] * slots for op in want}
+    stream = res.opstream()
+    assert set(stream.bytes[stream.structure == stream.structures.index("kbuffer")].tolist()) == {16}
+    colours = deep.rgba[:, :3] if entry == "rgbz" else np.repeat(np.clip(1 - deep.z, 0, 1)[:, None], 3, axis=1)
+    stored = make_trace(deep.x, deep.y, deep.z, np.c_[colours, np.full(len(deep), 0.5)], width=deep.width,
+                        height=deep.height, meta=dict(deep.meta))
+    kept = np.isin(np.arange(len(deep)), res.lists.fragment)
+    assert np.allclose(res.image, composite_exact(stored.subset(kept)), atol=1e-5)
+    times = np.tile(2 * np.arange(len(deep)), (res.geometry_passes, 1))
+    image, stats = res.extras["rmw_replay"](times, times + 1)
+    assert np.array_equal(image, res.image) and stats["lost_entries"] == 0
+
+
 # ---------------------------------------------------------------------- timing
 def test_hazards_are_counted_per_pass():
     # A reads at 0 and writes at 4 in pass 0, then read-modify-writes again in pass 1 (cycles 20-30); B reads at

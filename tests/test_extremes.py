@@ -18,7 +18,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from extremes import (build, constant_alpha, equal_depths, from_histogram, hot_pixel, layer_stack, one_pixel,
-                      packed_depth_collisions)
+                      packed_depth_collisions, stored_as)
 from simpy.core import NORMAL
 from simpy.events import Event
 from test_hw_units import SIMPLE, simulate
@@ -243,6 +243,20 @@ def test_hundreds_of_layers_of_one_alpha(alpha):
     trace = constant_alpha(300, np.float32(alpha), seed=int(alpha * 1000))
     for name in ALL:
         check_run(name, trace, run(name, trace))
+
+
+@pytest.mark.parametrize("entry", ["rgbz", "z"])
+def test_kbuffer_entry_formats_give_their_models_image(entry):
+    """The k-buffers' RGBZ and Z-only entries (seed 004 Table 1) on extreme traces (depth complexity 1,000, a
+    full screen at 64, 300 layers of alpha 0.99, six equal depths, a hot pixel): each image is the scheme's
+    model of the trace as its entries store it (extremes.stored_as: the RGB, or the grey 1 - z, at the uniform
+    alpha), with the same drops."""
+    traces = [one_pixel(1000, seed=1), layer_stack(16, 16, 64), constant_alpha(300, np.float32(0.99), seed=2),
+              equal_depths(6, 0.5, seed=3), hot_pixel(100, 8, 8)]
+    for trace in traces:
+        for name in ("kbuffer", "multipass-kbuffer"):
+            for alpha in (0.3, 1.0):
+                check_run(name, stored_as(trace, entry, alpha), run(name, trace, entry=entry, uniform_alpha=alpha))
 
 
 @pytest.mark.parametrize("z", [0.0, 0.5, 1.0])

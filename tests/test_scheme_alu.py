@@ -21,6 +21,7 @@ from gpusim.schemes.common.alu import (COMPARE_EXCHANGE, COMPOSITE, DUAL_PEEL_TE
                                        PREMULTIPLY, RECIRCULATE_TEST, SHARED_ATOMIC, UNPACK_RGBA8, UNPACK_SPLIT_RGB24,
                                        WBOIT_RESOLVE, WBOIT_WEIGHT, WEIGHT_FACTOR_PAIR, compare_exchange,
                                        weight_factor_work)
+from gpusim.schemes.common.kbuffer_entries import DEPTH_CUE
 
 COUNT = np.array([3, 2, 0, 0, 0, 0, 1, 0])      # fragments per pixel of the tiny trace
 
@@ -89,6 +90,15 @@ def test_kbuffer_inserts_with_k_compare_exchanges_of_its_entry_format():
     assert sorted(t for _, w in batched[:3] for t in w) == list(range(6))
     # the programmable blender runs the program in the ROP: only the resolve is SM work
     assert computes(run("kbuffer", k=2, hw="blender")) == [(2, per_pixel(np.minimum(COUNT, 2) * COMPOSITE))]
+    # RGBZ entries move 3 colour registers beside the depth (9 an exchange); Z-only entries the depth alone (3),
+    # and the resolve makes each entry's grey 1 - z (DEPTH_CUE) before compositing it
+    kept = np.minimum(COUNT, 2)
+    assert computes(run("kbuffer", k=2, entry="rgbz")) == [(1, {f: 2 * 9 for f in range(6)}),
+                                                           (2, per_pixel(kept * COMPOSITE))]
+    assert computes(run("kbuffer", k=2, entry="z")) == [(1, {f: 2 * 3 for f in range(6)}),
+                                                        (2, per_pixel(kept * (COMPOSITE + DEPTH_CUE)))]
+    assert computes(run("kbuffer", k=2, entry="z", mode="sort-blend"))[0] == (
+        1, {0: 6, 1: 6, 2: 6, 3: 6 + COMPOSITE + DEPTH_CUE, 4: 6, 5: 6})
 
 
 def test_register_sorts_of_the_linked_list_and_the_stencil_routed_abuffer():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import make_trace
+from extremes import stored_as
 
 from gpusim.errors import ConfigError, GpusimError
 from gpusim.metrics import composite_exact, image_error
@@ -294,6 +295,62 @@ def test_kbuffer_max_disorder_counts_positions_out_of_depth_order():
     ties = make_trace(np.zeros(4), np.zeros(4), [0.5] * 4, width=1, height=1)
     assert run("kbuffer", ties, k=1, mode="sort-blend").stats["max_disorder"].value == 0
     assert "max_disorder" not in run("kbuffer", ties, k=1).stats          # peel mode composites in depth order
+
+
+@pytest.mark.parametrize("entry,k,slots,slot_bytes", [("rgbz", 4, 4, 16), ("z", 16, 4, 16), ("z", 6, 2, 16),
+                                                     ("depth-colour", 4, 4, 20)])
+def test_kbuffer_entry_formats_size_its_buffer_and_accesses(random_trace, entry, k, slots, slot_bytes):
+    # seed 004 Table 1: 4 RGBZ entries or 16 Z-only ones fill four RGBA32F MRTs (64 B a pixel); a read or write
+    # moves one texel: an RGBZ entry, or four depths (k = 6 takes two texels, the second half used)
+    res = run("kbuffer", random_trace, k=k, entry=entry, uniform_alpha=0.5)
+    P, n = random_trace.pixel_count, len(random_trace)
+    assert res.footprint["kbuffer"] == P * slots * slot_bytes
+    assert res.structures[0].entry_bytes == {"rgbz": 16, "z": 4, "depth-colour": 20}[entry]
+    assert res.accesses["kbuffer"] == {"store": P * slots, "rmw_read": n * slots, "rmw_write": n * slots,
+                                       "load": P * slots}
+    stream = res.opstream()
+    assert set(stream.bytes.tolist()) == {slot_bytes}
+    assert int(stream.address.max()) + slot_bytes == P * slots * slot_bytes       # within the MRT planes
+    blend = run("kbuffer", random_trace, k=k, entry=entry, mode="sort-blend", uniform_alpha=0.5)
+    assert blend.accesses["kbuffer"] == res.accesses["kbuffer"]
+    assert blend.footprint["framebuffer"] == 16 * P
+
+
+def test_kbuffer_rgbz_and_z_entries_give_the_image_of_what_they_store(random_trace):
+    t = random_trace.subset(~random_trace.opaque)
+    for entry in ("rgbz", "z"):
+        for mode in ("peel", "sort-blend"):
+            res = run("kbuffer", t, k=3, entry=entry, mode=mode, uniform_alpha=0.25)
+            # the same fragments, composited from their stored colour at the uniform alpha
+            same = run("kbuffer", stored_as(t, entry, 0.25), k=3, mode=mode)
+            assert np.allclose(res.image, same.image, atol=1e-6) and np.array_equal(res.lists.fragment,
+                                                                                    same.lists.fragment)
+    # every fragment of one alpha, the one composited with (the default): RGBZ entries give the exact image
+    uniform = stored_as(t, "rgbz", 0.25)
+    exact(run("kbuffer", uniform, k=64, entry="rgbz"), uniform)
+    # replayed in event order without a hazard (each fragment's write lands before the next one reads), the
+    # timed image is the functional one, of the same entries
+    sequential = 2 * np.arange(len(t))
+    for entry in ("rgbz", "z"):
+        for mode in ("peel", "sort-blend"):
+            res = run("kbuffer", t, k=3, entry=entry, mode=mode, uniform_alpha=0.25)
+            image, stats = res.extras["rmw_replay"](sequential, sequential + 1)
+            assert np.array_equal(image, res.image) and stats["lost_entries"] == 0
+    # a Z-only buffer holds no colour: the trace's colours do not reach its image
+    recoloured = FragmentTrace(t.x, t.y, t.z, np.random.default_rng(1).random((len(t), 4)).astype(np.float32),
+                               t.prim, t.opaque, t.width, t.height, t.meta)
+    assert np.array_equal(run("kbuffer", t, entry="z", uniform_alpha=0.5).image,
+                          run("kbuffer", recoloured, entry="z", uniform_alpha=0.5).image)
+    # the uniform alpha defaults to the trace's single alpha, and fails naming the key where alphas differ
+    half = stored_as(t, "rgbz", 0.5)
+    assert np.array_equal(run("kbuffer", half, entry="rgbz").image,
+                          run("kbuffer", half, entry="rgbz", uniform_alpha=0.5).image)
+    with pytest.raises(GpusimError, match="uniform_alpha: entry = 'rgbz' stores no alpha .* set uniform_alpha"):
+        run("kbuffer", t, entry="rgbz")
+    with pytest.raises(ConfigError, match="colour_format: entry = 'z' stores no colour, not 'rgba8'; leave"):
+        make_scheme("kbuffer", {"entry": "z", "colour_format": "rgba8"})
+    with pytest.raises(ConfigError, match="uniform_alpha: must be <= 1"):
+        make_scheme("kbuffer", {"entry": "z", "uniform_alpha": 1.5})
 
 
 def test_stencil_routing_keeps_the_first_k_to_arrive(random_trace):

@@ -3,10 +3,19 @@
 Every fragment's program reads the pixel's k entries, modifies them and writes
 them back (section 3: Read, Modify, Write). On current hardware (section 3.2)
 the entries are MRT textures read through the texture path, so each fragment
-issues k ``rmw_read`` s and k ``rmw_write`` s of one entry (depth + colour);
+issues an ``rmw_read`` and an ``rmw_write`` of each of its pixel's k entries;
 the timing model finds the read-modify-write hazards between fragments of one
 pixel from exactly these operations. This functional model is the hazard-free
 result (fragments applied one at a time in submission order).
+
+Entry formats (``entry``; gpusim.schemes.common.kbuffer_entries, Table 1's
+"4 RGBZ" and "16 Z"): ``depth-colour`` (the default) a depth and a colour in
+``colour_format`` (4 + 16 bytes at rgba32f), one access per entry; ``rgbz``
+one RGBA32F texel of RGB + depth (16 B), one access per entry, composited at
+``uniform_alpha`` (it stores no alpha); ``z`` the depth alone (4 B), four to an
+RGBA32F texel, one access per texel (ceil(k / 4) of 16 B per fragment), its
+image a depth cue (grey 1 - z at ``uniform_alpha``). The entry's bytes size the
+buffer, its accesses and so the memory traffic the timing model moves.
 
 Modes:
 
@@ -39,13 +48,15 @@ Hardware (``hw``, section 3.1):
 
 ALU work beyond each operation's own (gpusim.schemes.common.alu): between its
 reads and writes a fragment's program inserts itself into the k sorted entries,
-k compare-exchanges of depth + colour entries (``compare_exchange`` of the
-colour format: RGBZ entries move more registers than a depth alone), and in
-``sort-blend`` a fragment that finds the k entries full composites the nearest
-of the k + 1 into the framebuffer (``COMPOSITE``). With ``hw = blender`` that
-program runs in the blender (``program_blend``), not on the SM. The resolve
-composites each pixel's min(n, k) stored entries, already in depth order. The
-entries are textures (MRTs): the texture path converts their format.
+k compare-exchanges of entries (``compare_exchange`` of what an entry holds
+beside its depth: 11 instructions for depth + rgba32f colour, 9 for RGBZ, 3 for
+a depth alone), and in ``sort-blend`` a fragment that finds the k entries full
+composites the nearest of the k + 1 into the framebuffer (``COMPOSITE``, plus
+``DEPTH_CUE`` for Z-only entries). With ``hw = blender`` that program runs in the
+blender (``program_blend``), not on the SM. The resolve composites each pixel's
+min(n, k) stored entries, already in depth order (Z-only entries shaded first,
+``DEPTH_CUE`` each). The entries are textures (MRTs): the texture path converts
+their format.
 
 ``extras["rmw_replay"]`` replays the program in the timing model's event order
 (gpusim.schemes.common.kbuffer_replay) so the timed image shows the hazards' artifacts.
@@ -54,20 +65,24 @@ entries are textures (MRTs): the texture path converts their format.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Literal
 
 import numpy as np
 
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
-from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, compare_exchange
 from gpusim.schemes.common.arrays import entry_index, pixel_key, smallest_per_pixel
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC, EntryFormat, access_layout,
+                                                   check_entry, entry_bytes, entry_image, payload_bytes, per_access,
+                                                   resolve_alpha, resolve_alu)
 from gpusim.schemes.common.kbuffer_replay import make_replay
 from gpusim.schemes.common.reorder import batch_index, batch_primitives, centroid_order, permuted
-from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
+from gpusim.schemes.common.storage import ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
 FRAMEBUFFER_BYTES = 16   # RGBA32F off-screen framebuffer (one MRT attachment)
@@ -81,11 +96,16 @@ class KBuffer(Scheme):
     k: int = param(8, unit="entries/pixel", doc="k-buffer entries per pixel", min=1, max=64)
     mode: Literal["peel", "sort-blend"] = param("peel", doc="keep the k nearest, or blend a k-nearly-sorted stream")
     colour_format: ColourFormat = param("rgba32f", doc="entry colour format (the paper's FP32 MRTs)")
+    entry: EntryFormat = param("depth-colour", doc=ENTRY_DOC)
+    uniform_alpha: float | None = param(None, unit="1", doc=UNIFORM_ALPHA_DOC, min=0.0, max=1.0)
     order: Literal["submission", "centroid"] = param("submission", doc="primitive order (centroid: sort heuristic)")
     batch: int = param(0, unit="primitives", doc="primitives per batch with a flush between (0: no batching)", min=0)
     hw: Literal["texture-rmw", "scoreboard", "blender"] = param(
         "texture-rmw", doc="where the RMW runs: texture reads in the shader (current hardware), behind a "
                            "dispatch scoreboard (proposal 1), or in a programmable blender (proposal 2)")
+
+    def __post_init__(self) -> None:
+        check_entry(self.entry, self.colour_format)
 
     def simulate(self, trace) -> SchemeResult:
         n, P, k = len(trace), trace.pixel_count, self.k
@@ -93,7 +113,8 @@ class KBuffer(Scheme):
         t = permuted(trace, submission) if self.order == "centroid" else trace
         g = PixelGroups(t)
         pix = g.pix
-        entry_bytes = DEPTH_BYTES + COLOUR_BYTES[self.colour_format]
+        fmt, cf = self.entry, self.colour_format
+        slots, slot_bytes = access_layout(fmt, cf, k)      # k entries, or ceil(k / 4) texels of Z-only entries
         blend = self.mode == "sort-blend"
 
         passes = [Pass("clear", "clear", "entry")]
@@ -114,19 +135,20 @@ class KBuffer(Scheme):
         resolve = len(passes) - 1
         structures = ["kbuffer"] + (["framebuffer"] if blend else [])
         plan = OpPlan(passes, structures)
-        plan.add(0, "store", "kbuffer", P * k, 1, lambda i, s: i * entry_bytes, entry_bytes)
+        plan.add(0, "store", "kbuffer", P * slots, 1, lambda i, s: i * slot_bytes, slot_bytes)
         if blend:
             plan.add(0, "store", "framebuffer", P, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES)
-        composite = COMPOSITE * (g.arrival >= k) if blend else 0   # a full buffer composites its nearest
-        add_rmw(plan, frag_pass, n, pix, P, k, self.colour_format, self.hw, framebuffer=blend, extra=composite)
+        shade = COMPOSITE + resolve_alu(fmt)                       # an entry's colour made and composited
+        composite = shade * (g.arrival >= k) if blend else 0       # a full buffer composites its nearest
+        add_rmw(plan, frag_pass, n, pix, P, k, fmt, cf, self.hw, framebuffer=blend, extra=composite)
         pixels = P
-        plan.add(resolve, "load", "kbuffer", pixels, k,
-                 lambda i, s: entry_index(i, s, k, P, "layer-major") * entry_bytes, entry_bytes)
+        plan.add(resolve, "load", "kbuffer", pixels, slots,
+                 lambda i, s: entry_index(i, s, slots, P, "layer-major") * slot_bytes, slot_bytes)
         if blend:
             plan.add(resolve, "load", "framebuffer", pixels, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES)
-        plan.compute(resolve, pixels, np.minimum(g.count, k) * COMPOSITE)   # the stored entries, nearest first
+        plan.compute(resolve, pixels, np.minimum(g.count, k) * shade)   # the stored entries, nearest first
 
         stats: dict[str, Stat] = {"batches": Stat(n_batches, "batches", "geometry batches (flushes + 1)")}
         if blend:
@@ -143,15 +165,16 @@ class KBuffer(Scheme):
             order = smallest_per_pixel(pix, g.key, k, order=g.by_depth)
             kept_count = len(order)
             used = kept_count
-        image = composite_stored(t, pix, order, self.colour_format)
-        struct = [Structure("kbuffer", entry_bytes, P * k, used, f"k entries of depth + {self.colour_format} colour")]
+        image_of = partial(entry_image, t, pix, entry=fmt, colour_format=cf,
+                           uniform_alpha=resolve_alpha(fmt, self.uniform_alpha, g))
+        struct = [Structure("kbuffer", entry_bytes(fmt, cf), P * slots * per_access(fmt), used, entries_doc(fmt, cf))]
         if blend:
             struct.append(Structure("framebuffer", FRAMEBUFFER_BYTES, P, g.covered, "RGBA32F blend target (MRT)"))
         dropped = n - kept_count
         extras = {}
         if self.hw != "blender":
-            extras["rmw_replay"] = make_replay(t, pix, g.key, k, blend, self.colour_format, order)
-        return SchemeResult(self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
+            extras["rmw_replay"] = make_replay(pix, g.key, k, blend, image_of, order)
+        return SchemeResult(self.name, self.params(), image_of(order), n, g.covered, struct, plan, geometry_passes=1,
                             dropped_fragments=int(dropped),
                             overflowed_pixels=0 if blend else int(np.count_nonzero(g.count > k)),
                             lists=CapturedLists(pix[order], submission[order]), stats=stats,
@@ -188,30 +211,38 @@ def max_disorder(pix_sorted: np.ndarray, key_sorted: np.ndarray, pix_emitted: np
     return int(np.maximum(np.maximum(lo - position, position - hi), 0).max())
 
 
-def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count: int, k: int, colour_format: str,
-            hw: str, framebuffer: bool = False, extra=0) -> None:
+def entries_doc(entry: str, colour_format: str) -> str:
+    """The k-buffer structure's description for entry format ``entry``."""
+    return {"depth-colour": f"k entries of depth + {colour_format} colour",
+            "rgbz": "k RGBA32F texels of RGB + depth (RGBZ)",
+            "z": "k depths, four to an RGBA32F texel (Z-only)"}[entry]
+
+
+def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count: int, k: int, entry: str,
+            colour_format: str, hw: str, framebuffer: bool = False, extra=0) -> None:
     """Add each fragment thread's read-modify-write of its pixel's ``k`` entries (section 3.2) to pass
     ``pass_index`` of ``plan``.
 
     ``threads``: the fragment threads (an array, or n for 0..n-1); ``pix[i]`` the pixel of thread ``i``.
-    ``hw`` as :class:`KBuffer`'s: k ``rmw_read`` s, the insertion into the k sorted entries (plus ``extra``
-    instructions per thread), k ``rmw_write`` s, behind a ``scoreboard`` dispatch with ``scoreboard``; or one
+    ``hw`` as :class:`KBuffer`'s: an ``rmw_read`` of each of the pixel's k entries (of each of its ceil(k / 4)
+    texels with ``entry = z``), the insertion into the k sorted entries (plus ``extra`` instructions per
+    thread), as many ``rmw_write`` s, behind a ``scoreboard`` dispatch with ``scoreboard``; or one
     ``program_blend`` with ``blender``. ``framebuffer``: sort-and-blend's RGBA32F target is read and written too.
     """
-    entry_bytes = DEPTH_BYTES + COLOUR_BYTES[colour_format]
-    at = lambda i, s: entry_index(pix[i], s, k, pixel_count, "layer-major") * entry_bytes  # noqa: E731  (k MRT planes)
+    slots, slot_bytes = access_layout(entry, colour_format, k)
+    at = lambda i, s: entry_index(pix[i], s, slots, pixel_count, "layer-major") * slot_bytes  # noqa: E731  (MRT planes)
     if hw == "blender":
-        program_bytes = k * entry_bytes + (FRAMEBUFFER_BYTES if framebuffer else 0)
-        plan.add(pass_index, "program_blend", "kbuffer", threads, 1, lambda i, s: pix[i] * entry_bytes, program_bytes)
+        program_bytes = slots * slot_bytes + (FRAMEBUFFER_BYTES if framebuffer else 0)
+        plan.add(pass_index, "program_blend", "kbuffer", threads, 1, lambda i, s: pix[i] * slot_bytes, program_bytes)
         return
     if hw == "scoreboard":
-        plan.add(pass_index, "scoreboard", "kbuffer", threads, 1, lambda i, s: pix[i] * entry_bytes, 0)
-    plan.add(pass_index, "rmw_read", "kbuffer", threads, k, at, entry_bytes, dep=hw == "scoreboard")
+        plan.add(pass_index, "scoreboard", "kbuffer", threads, 1, lambda i, s: pix[i] * slot_bytes, 0)
+    plan.add(pass_index, "rmw_read", "kbuffer", threads, slots, at, slot_bytes, dep=hw == "scoreboard")
     fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
     if framebuffer:
         plan.add(pass_index, "rmw_read", "framebuffer", threads, 1, fb, FRAMEBUFFER_BYTES)
-    # modify: insert into the k sorted entries (a compare-exchange of depth + colour per entry)
-    plan.compute(pass_index, threads, k * compare_exchange(COLOUR_BYTES[colour_format]) + extra)
-    plan.add(pass_index, "rmw_write", "kbuffer", threads, k, at, entry_bytes, dep=True)
+    # modify: insert into the k sorted entries (a compare-exchange of the depth and what the entry holds beside it)
+    plan.compute(pass_index, threads, k * compare_exchange(payload_bytes(entry, colour_format)) + extra)
+    plan.add(pass_index, "rmw_write", "kbuffer", threads, slots, at, slot_bytes, dep=True)
     if framebuffer:
         plan.add(pass_index, "rmw_write", "framebuffer", threads, 1, fb, FRAMEBUFFER_BYTES, dep=True)

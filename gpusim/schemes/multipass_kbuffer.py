@@ -17,6 +17,13 @@ Equal depths: inside a pass as the k-buffer (a fragment goes behind stored ones 
 submitted is nearer); fragments of the depth a pass ended at that did not fit in its k entries are never
 captured (the next pass takes only depths strictly behind): ``tie_losses``, the ``dropped_fragments``.
 
+Entry formats (``entry``, ``uniform_alpha``) as the k-buffer's (gpusim.schemes.common.kbuffer_entries): with
+``rgbz`` (16 B) each entry is one RGBA32F texel, with ``z`` (4 B) four entries share one, and every read, write
+and store of the buffer moves one such texel; the resolve composites what the entries hold (RGB at the uniform
+alpha, or the depth cue of Z-only entries, ``DEPTH_CUE`` an entry more). This is seed 004's multi-pass mode with
+k layers peeled per pass; the paper's Table 1 "MP" column is traditional depth peeling, one layer a pass
+(``depth-peeling`` with ``termination = fixed``).
+
 The functional model is the hazard-free result. ``extras["rmw_replay"]`` replays each peel pass in the
 timing model's event order (gpusim.schemes.common.kbuffer_replay), on the fragments the hazard-free pass had
 that lie behind the depth the replayed previous pass ended at: a fragment a hazard loses is lost for good.
@@ -26,19 +33,23 @@ The timing is the hazard-free run's: its passes and their fragments do not follo
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Literal
 
 import numpy as np
 
 from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
-from gpusim.schemes.base import Scheme, composite_stored, register
+from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, PEEL_TEST
 from gpusim.schemes.common.arrays import entry_index, lex_order, rank_in_runs
 from gpusim.schemes.common.groups import PixelGroups
+from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC, EntryFormat, access_layout,
+                                                   check_entry, entry_bytes, entry_image, per_access, resolve_alpha,
+                                                   resolve_alu)
 from gpusim.schemes.common.kbuffer_replay import make_multipass_replay
-from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat
-from gpusim.schemes.kbuffer import FRAMEBUFFER_BYTES, add_rmw
+from gpusim.schemes.common.storage import DEPTH_BYTES, ColourFormat
+from gpusim.schemes.kbuffer import FRAMEBUFFER_BYTES, add_rmw, entries_doc
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
 
@@ -69,6 +80,8 @@ class MultipassKBuffer(Scheme):
     k: int = param(8, unit="entries/pixel", doc="k-buffer entries per pixel: layers peeled per geometry pass",
                    min=1, max=64)
     colour_format: ColourFormat = param("rgba32f", doc="entry colour format")
+    entry: EntryFormat = param("depth-colour", doc=ENTRY_DOC)
+    uniform_alpha: float | None = param(None, unit="1", doc=UNIFORM_ALPHA_DOC, min=0.0, max=1.0)
     termination: Literal["known-layers", "occlusion-query"] = param(
         "known-layers", doc="stop after the last pass that captures anything, or run one more whose occlusion "
                             "query finds no fragment left")
@@ -76,11 +89,14 @@ class MultipassKBuffer(Scheme):
         "texture-rmw", doc="where the RMW runs (as the k-buffer's): texture reads in the shader, behind a "
                            "dispatch scoreboard, or in a programmable blender")
 
+    def __post_init__(self) -> None:
+        check_entry(self.entry, self.colour_format)
+
     def simulate(self, trace) -> SchemeResult:
         g = PixelGroups(trace)
         n, P, k, pix = len(trace), trace.pixel_count, self.k, g.pix
-        fmt = self.colour_format
-        entry_bytes = DEPTH_BYTES + COLOUR_BYTES[fmt]
+        fmt, cf = self.entry, self.colour_format
+        slots, slot_bytes = access_layout(fmt, cf, k)      # k entries, or ceil(k / 4) texels of Z-only entries
         peels = peel_in_passes(pix, g.key, g.by_depth, k, P)
         m = len(peels)
         total = m + (1 if self.termination == "occlusion-query" and n else 0)
@@ -93,8 +109,8 @@ class MultipassKBuffer(Scheme):
                 resolve_at.append(len(passes))
                 passes.append(Pass(f"resolve {p}", "fullscreen", "pixel"))
         plan = OpPlan(passes, ["kbuffer", "peel_depth", "accumulation"])
-        entries = lambda i, s: i * entry_bytes  # noqa: E731
-        plan.add(0, "store", "kbuffer", P * k, 1, entries, entry_bytes)
+        entries = lambda i, s: i * slot_bytes  # noqa: E731
+        plan.add(0, "store", "kbuffer", P * slots, 1, entries, slot_bytes)
         plan.add(0, "store", "peel_depth", P, 1, lambda i, s: i * DEPTH_BYTES, DEPTH_BYTES)
         plan.add(0, "store", "accumulation", P, 1, lambda i, s: i * FRAMEBUFFER_BYTES, FRAMEBUFFER_BYTES)
         # every pass after the first: the pixel's peel depth, strictly behind it or discard
@@ -104,7 +120,7 @@ class MultipassKBuffer(Scheme):
         plan.compute(0, n, PEEL_TEST, count=max(total - 1, 0), seq_pass=later)
         for p, (alive, kept) in enumerate(peels):
             threads = np.sort(alive)
-            add_rmw(plan, peel_at[p], threads, pix[threads], P, k, fmt, self.hw)
+            add_rmw(plan, peel_at[p], threads, pix[threads], P, k, fmt, cf, self.hw)
             # the pixels with entries (kept is grouped by pixel): read, composite, blend in, keep the peel depth,
             # empty the entries
             pk = pix[kept]
@@ -112,21 +128,21 @@ class MultipassKBuffer(Scheme):
             done = pk[first]
             stored = np.diff(np.r_[np.flatnonzero(first), len(kept)])
             r = resolve_at[p]
-            slot = lambda i, s, d=done: entry_index(d[i], s, k, P, "layer-major") * entry_bytes  # noqa: E731
-            plan.add(r, "load", "kbuffer", done, k, slot, entry_bytes)
-            plan.compute(r, done, stored * COMPOSITE)
+            slot = lambda i, s, d=done: entry_index(d[i], s, slots, P, "layer-major") * slot_bytes  # noqa: E731
+            plan.add(r, "load", "kbuffer", done, slots, slot, slot_bytes)
+            plan.compute(r, done, stored * (COMPOSITE + resolve_alu(fmt)))
             plan.add(r, "blend", "accumulation", done, 1, lambda i, s, d=done: d[i] * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES, dep=True)
             plan.add(r, "store", "peel_depth", done, 1, lambda i, s, d=done: d[i] * DEPTH_BYTES, DEPTH_BYTES)
-            plan.add(r, "store", "kbuffer", done, k, slot, entry_bytes)
+            plan.add(r, "store", "kbuffer", done, slots, slot, slot_bytes)
 
         kept_all = np.concatenate([kept for _, kept in peels]) if peels else np.zeros(0, np.int64)
         rank = np.repeat(np.arange(m), [len(kept) for _, kept in peels])
         order = kept_all[lex_order(pix[kept_all], rank)]        # pass by pass, each nearest first: depth order
         lost = n - len(order)
         kept_n = np.bincount(pix[order], minlength=P)
-        struct = [Structure("kbuffer", entry_bytes, P * k, int(kept_n.clip(max=k).sum()),
-                            f"k entries of depth + {fmt} colour (emptied by each resolve)"),
+        struct = [Structure("kbuffer", entry_bytes(fmt, cf), P * slots * per_access(fmt), int(kept_n.clip(max=k).sum()),
+                            f"{entries_doc(fmt, cf)} (emptied by each resolve)"),
                   Structure("peel_depth", DEPTH_BYTES, P, g.covered, "depth the pixel's previous pass ended at"),
                   Structure("accumulation", FRAMEBUFFER_BYTES, P, g.covered, "RGBA32F colour composited so far")]
         stats = {"tie_losses": Stat(int(lost), "fragments", "fragments at the depth a pass ended at that did "
@@ -134,9 +150,11 @@ class MultipassKBuffer(Scheme):
                  "layers": Stat(int(g.layers.max(initial=0)), "layers", "largest number of distinct depths of a "
                                 "pixel")}
         extras = {}
+        image_of = partial(entry_image, trace, pix, entry=fmt, colour_format=cf,
+                           uniform_alpha=resolve_alpha(fmt, self.uniform_alpha, g))
         if self.hw != "blender":
-            extras["rmw_replay"] = make_multipass_replay(trace, pix, g.key, k, fmt, order)
-        return SchemeResult(self.name, self.params(), composite_stored(trace, pix, order, fmt), n, g.covered,
+            extras["rmw_replay"] = make_multipass_replay(P, pix, g.key, k, image_of, order)
+        return SchemeResult(self.name, self.params(), image_of(order), n, g.covered,
                             struct, plan, geometry_passes=total, dropped_fragments=int(lost),
                             overflowed_pixels=int(np.count_nonzero(g.count > kept_n)),
                             lists=CapturedLists(pix[order], order), stats=stats, extras=extras)

@@ -15,6 +15,8 @@ early_z          phases 1 and 2 of the seed-003 transparent-storage pipelines
 fold             per-pixel sequential updates in submission order (ROP
                  blending), vectorised over pixels
 groups           per-pixel views of a trace: arrival order and depth order
+kbuffer_entries  the k-buffer's entry formats (depth + colour, RGBZ, Z-only):
+                 bytes, MRT texels, the image of what they store
 kbuffer_replay   the k-buffer program replayed in event order (what RMW
                  hazards do to the image)
 leading_zeros    leading-0s elimination of stored colour (seed 003)

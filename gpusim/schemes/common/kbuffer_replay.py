@@ -13,24 +13,27 @@ artifacts of the paper's Figure 3).
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
-from gpusim.schemes.base import composite_stored
 from gpusim.schemes.common.arrays import lex_order
 
+#: the image of the fragments the entries hold (grouped by pixel, in compositing order), as the entries store them
+ImageOf = Callable[[np.ndarray], np.ndarray]
 
-def make_replay(trace, pix: np.ndarray, key: np.ndarray, k: int, blend: bool, colour_format: str,
-                hazard_free: np.ndarray):
-    """``replay(read_cycle, write_cycle) -> (image, stats)`` for fragment threads of ``trace``."""
+
+def make_replay(pix: np.ndarray, key: np.ndarray, k: int, blend: bool, image_of: ImageOf, hazard_free: np.ndarray):
+    """``replay(read_cycle, write_cycle) -> (image, stats)`` for the fragment threads (``pix``, ``key``: their
+    pixels and depth keys; ``hazard_free``: what the entries hold without hazards)."""
 
     def replay(read: np.ndarray, write: np.ndarray):
-        return replayed_image(trace, pix, replay_entries(pix, key, k, blend, read, write), colour_format,
-                              hazard_free)
+        return replayed_image(len(pix), replay_entries(pix, key, k, blend, read, write), image_of, hazard_free)
 
     return replay
 
 
-def make_multipass_replay(trace, pix: np.ndarray, key: np.ndarray, k: int, colour_format: str,
+def make_multipass_replay(pixel_count: int, pix: np.ndarray, key: np.ndarray, k: int, image_of: ImageOf,
                           hazard_free: np.ndarray):
     """The same for a multi-pass k-buffer (peel mode, one peel per geometry pass): ``read`` and ``write`` hold
     one row per pass with RMW operations (or are one row), replayed one after the other (passes are
@@ -39,7 +42,7 @@ def make_multipass_replay(trace, pix: np.ndarray, key: np.ndarray, k: int, colou
     looked for again, and none is composited twice."""
 
     def replay(read: np.ndarray, write: np.ndarray):
-        end = np.full(trace.pixel_count, -1, np.int64)     # depth key the pixel's replayed passes ended at
+        end = np.full(pixel_count, -1, np.int64)     # depth key the pixel's replayed passes ended at
         got = []
         for r, w in zip(np.atleast_2d(read), np.atleast_2d(write)):
             behind = key.astype(np.int64) > end[pix]
@@ -50,15 +53,16 @@ def make_multipass_replay(trace, pix: np.ndarray, key: np.ndarray, k: int, colou
             end[pix[last]] = key[last]
         seq = np.concatenate(got) if got else np.zeros(0, np.int64)
         rank = np.repeat(np.arange(len(got)), [len(o) for o in got])
-        return replayed_image(trace, pix, seq[lex_order(pix[seq], rank)], colour_format, hazard_free)
+        return replayed_image(len(pix), seq[lex_order(pix[seq], rank)], image_of, hazard_free)
 
     return replay
 
 
-def replayed_image(trace, pix: np.ndarray, order_out: np.ndarray, colour_format: str, hazard_free: np.ndarray):
-    """The image of the entries a replay left (grouped by pixel, in compositing order) and its stats."""
-    image = composite_stored(trace, pix, order_out, colour_format)
-    kept = np.zeros(len(pix), bool)
+def replayed_image(n: int, order_out: np.ndarray, image_of: ImageOf, hazard_free: np.ndarray):
+    """The image of the entries a replay left (grouped by pixel, in compositing order; ``n`` fragments in all)
+    and its stats."""
+    image = image_of(order_out)
+    kept = np.zeros(n, bool)
     kept[order_out] = True
     lost = int(np.count_nonzero(~kept[hazard_free]))
     return image, {"lost_entries": lost, "stored_entries": int(len(order_out)),
