@@ -157,6 +157,26 @@ def test_alu_work_runs_as_long_as_the_busiest_lane():
     assert rec["passes"][0]["cycles"] >= 30
 
 
+def test_alu_instructions_issue_at_the_lanes_issue_width():
+    # the same resolve on lanes that issue 4 ALU instructions a cycle (G71's two co-issuing vec4 units): the
+    # busiest lane's 30 take ceil(30 / 4) = 8 cycles; a memory instruction keeps its cycle of the port, and the 4
+    # ALU instructions around it (core.instructions_per_op) hold the port 1 cycle more
+    plan = OpPlan([Pass("resolve", "fullscreen", "pixel")], ["fb"])
+    plan.add(0, "load", "fb", 3, 1, lambda i, s: i * 4, 4)
+    plan.compute(0, 3, [10, 30, 0])
+    plan.add(0, "store", "fb", 3, 1, lambda i, s: i * 4, 4, dep=True)
+    bases = layout_bases(plan.structures, {"fb": 64})
+    work = Workload(plan, bases, WIDTH, WIDTH, np.zeros(0, np.int64), np.zeros(0, np.int64), triangles=0)
+    gpu = load_gpu("gtx280", SIMPLE + ["core.alu_issue_width=4"])
+    from gpusim.hw.program import Compute
+    assert lower(work, gpu).warp(0)[1] == Compute(8)
+    cycles, _ = _run(gpu, work)
+    assert cycles == (1 + 100) + 8 + (1 + 100)
+    gpu = load_gpu("gtx280", SIMPLE + ["core.alu_issue_width=4", "core.instructions_per_op=4"])
+    assert gpu.core.op_issue_cycles == 1 + 1 and gpu.core.alu_cycles(np.array([30, 3])).tolist() == [8, 1]
+    assert analytic_timing(_Result(plan, bases), work, gpu)["passes"][0]["cycles"] >= 8 + 2 * 2
+
+
 def test_software_rasterizer_through_an_l2():
     # the vertex buffers sit above every structure, and their segments must stay addressable on the L2 path
     # (32-byte segments on `modern`)

@@ -299,7 +299,8 @@ def _repeats(timed: dict, shape) -> int | None:
 def analytic_timing(result, work, gpu) -> dict:
     plan, bases = result.plan, result.bases()
     c, m = gpu.core, gpu.memory
-    ws, cost = c.warp_size, c.issue_cycles * (1 + c.instructions_per_op)
+    ws, cost = c.warp_size, c.op_issue_cycles
+    alu_cost = c.issue_cycles / c.alu_issue_width       # an ALU instruction of a warp (alu_issue_width a lane-cycle)
     icn = m.interconnect_latency
     lat = {MEM: 2 * icn + gpu.dram.latency + (gpu.l2.latency if gpu.l2.size_bytes else 0),
            ATOMIC: 2 * icn + gpu.atomic.latency, ROP: 2 * icn + gpu.rop.latency, SCOREBOARD: 0}
@@ -414,7 +415,7 @@ def analytic_timing(result, work, gpu) -> dict:
             # warp instructions: lanes in order, each warp issues its busiest lane's count
             busiest = warp_threads * c0 if uniform else packing.warp_max(per_lane, keys).sum()
             if compute:
-                alu[p] += busiest * c.issue_cycles
+                alu[p] += busiest * alu_cost
             else:
                 wis[p] += busiest
             ops = float(counts.sum())
@@ -457,7 +458,7 @@ def analytic_timing(result, work, gpu) -> dict:
             # and the first dependent operation after a producer waits once per thread
             # (the same for every lane when each runs one thread with the same operations: a number)
             same = uniform and distinct
-            add = (c0 if same else per_lane) * (c.issue_cycles if compute else cost)
+            add = (c0 if same else per_lane) * (alu_cost if compute else cost)
             lp = last_producer
             if g.dep and produces:
                 add += (c0 if same else per_lane) * lat[cls]
@@ -517,7 +518,7 @@ def analytic_timing(result, work, gpu) -> dict:
             frags = _union([ids[i] for i in groups_of_pass[p]])
             r = gpu.raster
             box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
-            setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * c.issue_cycles
+            setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * alu_cost
             sw_warps = -(-tris // ws)
             bounds["issue"] += (setup + 2 * sw_warps * cost) / min(c.sms, sw_warps)
             dram_bytes[p] += tris * (INDEX_BYTES + 3 * r.vertex_bytes)

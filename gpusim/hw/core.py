@@ -9,8 +9,10 @@ simpy process that runs its warps one after the other.
 A warp issues its instructions in program order through its SM's issue port
 (warps take the port in the order they ask for it). A memory instruction and
 the ``core.instructions_per_op`` ALU instructions around it hold the port for
-``issue_cycles * (1 + instructions_per_op)`` cycles; a :class:`Compute`
-instruction (triangle setup) for its own cycles. An instruction that depends
+``issue_cycles`` plus the ALU instructions' cycles; a :class:`Compute`
+instruction (triangle setup, a scheme's ALU work) for its own cycles. ALU
+instructions issue ``core.alu_issue_width`` per lane and cycle (1 on a scalar
+SIMT lane; a G71 pixel pipeline's two co-issuing vec4 units issue 4). An instruction that depends
 on the thread's previous result waits for it, and other warps of the SM issue
 meanwhile (latency hiding). A unit that cannot take an instruction yet (a full
 reorder buffer, a busy scoreboard cell) hands back a simpy event; the warp
@@ -43,6 +45,15 @@ class CoreConfig:
     instructions_per_op: int = param(4, unit="instructions", doc="ALU instructions a thread issues per memory "
                                      "operation (address arithmetic, the shader or rasterizer work around it)",
                                      min=0)
+    alu_issue_width: int = param(1, unit="instructions/lane/cycle", doc="scalar ALU instructions a lane issues "
+                                 "per cycle (the ALU instructions around a memory operation and a scheme's "
+                                 "declared ALU work; a memory instruction still takes a cycle of the lane): 1 for "
+                                 "a scalar SIMT lane (GT200 and later, whose lanes are the count); 4 for a "
+                                 "G70/G71 pixel pipeline, two vec4 shader units in series (dual issue), each "
+                                 "co-issuing two instructions on a 3+1 or 2+2 split of its components (GPU Gems "
+                                 "2 ch. 30; NVIDIA's NV40/G70 disclosures: 4 instructions per pixel per clock); "
+                                 "the schemes' scalar counts are taken as independent work a compiler packs",
+                                 min=1, max=8)
     thread_mapping: Literal["auto", "fragment", "triangle"] = param(
         "auto", doc="thread of a geometry pass: one per fragment, one per triangle (FreePipe: the thread "
                     "rasterizes its triangle and issues its fragments' operations in turn), or auto "
@@ -60,10 +71,15 @@ class CoreConfig:
         """Cycles one warp instruction occupies the SM's issue port."""
         return -(-self.warp_size // self.lanes_per_sm)
 
+    def alu_cycles(self, instructions):
+        """Issue-port cycles of a warp's ``instructions`` ALU instructions (an int or an integer array): each
+        lane issues ``alu_issue_width`` of them a cycle, rounded up to whole cycles."""
+        return -(-(instructions * self.issue_cycles) // self.alu_issue_width)
+
     @property
     def op_issue_cycles(self) -> int:
         """Issue-port cycles of a memory instruction and the ALU instructions around it."""
-        return self.issue_cycles * (1 + self.instructions_per_op)
+        return self.issue_cycles + self.alu_cycles(self.instructions_per_op)
 
 
 @register_unit

@@ -329,8 +329,8 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None)
             # each warp: load its triangles' vertices, then set up and scan the largest bounding box among them
             bbox = bbox_pixels(prim - key_lo, work.frag_pixel[fr], work.width, universe)[lane_keys - key_lo]
             r = gpu.raster
-            setup_cycles = (r.setup_instructions + r.pixel_instructions
-                            * np.maximum.reduceat(bbox, first_lane)) * gpu.core.issue_cycles
+            setup_cycles = gpu.core.alu_cycles(r.setup_instructions + r.pixel_instructions
+                                               * np.maximum.reduceat(bbox, first_lane))
             software.append((p, np.arange(warp0, warp0 + n_warps), setup_cycles, lane_keys))
             order = np.argsort(prim, kind="stable")
             sp = prim[order]
@@ -356,7 +356,7 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None)
                        np.full(len(start), pc.group, np.int64),
                        k[start] if k is not None else np.zeros(len(start), np.int64))
             if pc.instructions is not None:      # ALU work: the instruction's busiest lane decides its cycles
-                busiest = np.maximum.reduceat(pc.instructions, start) * gpu.core.issue_cycles
+                busiest = gpu.core.alu_cycles(np.maximum.reduceat(pc.instructions, start))
                 inst.append((*columns, np.zeros(len(start), np.int64), np.zeros(len(start), np.int64),
                              np.full(len(start), p, np.int64), busiest))
                 continue
