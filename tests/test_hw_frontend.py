@@ -69,6 +69,21 @@ def test_the_slowest_front_end_stage_decides():
     assert per_triangle_cycles(gpu) == 2.0                                              # 3 x 64 / 96
 
 
+def test_vertices_from_host_memory_cross_the_bus():
+    # client-side arrays: 3 x 4 B of indices and half a 16 B vertex per triangle (a closed mesh's vertex array),
+    # 20 B at 4 B/cycle = 5 cycles per triangle, whatever the post-transform cache and the DRAM channels do;
+    # 1,000 triangles keep the pass's 10 stores waiting 5,000 cycles
+    extra = ["raster.triangles_per_cycle=1", "raster.vertex_instructions=0", "raster.vertex_bytes=16",
+             "raster.vertices_per_triangle=3", "raster.vertex_source=host", "raster.host_bytes_per_cycle=4"]
+    plan, gpu, work, bases = _draw(np.arange(10) * 2, np.arange(10) * 100, 1000, extra=extra)
+    assert per_triangle_cycles(gpu) == 5.0
+    cycles, _ = _run(gpu, work)
+    assert cycles == 5000
+    assert analytic_timing(_Result(plan, bases), work, gpu)["passes"][0]["bound"] == "raster"
+    _, gpu, _, _ = _draw([0], [0], 1, extra=extra[:-2])                     # the same mesh from device memory
+    assert per_triangle_cycles(gpu) == 3 * 16 / 32
+
+
 def test_quads_bound_the_rasterizer():
     # one triangle covering a 16x16 block: 64 quads at 0.5 quads/cycle = 128 cycles
     px = (np.arange(16)[:, None] * WIDTH + np.arange(16)[None, :]).ravel()

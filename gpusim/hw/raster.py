@@ -5,7 +5,11 @@ end, a pipeline of stages each with its own throughput:
 
 * vertex fetch: ``vertices_per_triangle`` shaded vertices per triangle (the
   post-transform cache's average miss rate), ``vertex_bytes`` each, read at
-  the DRAM channels' bandwidth;
+  the DRAM channels' bandwidth; or, with ``vertex_source = "host"`` (OpenGL
+  client-side vertex arrays, or a mesh larger than device memory), the draw's
+  index and vertex arrays over the host bus at ``host_bytes_per_cycle``: three
+  32-bit indices per triangle and ``MESH_VERTICES_PER_TRIANGLE`` vertices of
+  ``vertex_bytes`` (the vertex array of a closed mesh, sent once per draw);
 * vertex shading: ``vertex_instructions`` per shaded vertex, on
   ``vertex_lanes`` dedicated vertex lanes (G71 has separate vertex shaders), or
   on all the SMs' lanes when ``vertex_lanes`` is 0 (a unified GPU);
@@ -38,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -46,6 +51,10 @@ from gpusim.hw.unit import FP, Unit, occupancy_stats, register_unit
 
 
 INDEX_BYTES = 16        # a software rasterizer's triangle indices: one int4 texel
+HOST_INDEX_BYTES = 4    # a vertex index sent from host memory (GL_UNSIGNED_INT)
+#: vertices per triangle of a closed triangle mesh (Euler: V - E + F = 2 - 2g with E = 3F / 2, so V = F / 2 +
+#: 2 - 2g; the Stanford Dragon has 437,645 vertices for 871,414 triangles, Lucy 14,027,872 for 28,055,742)
+MESH_VERTICES_PER_TRIANGLE = 0.5
 
 
 @dataclass(frozen=True)
@@ -63,6 +72,14 @@ class RasterConfig:
                                          "cache-optimised order, 3 without indices)", min=0, max=3)
     vertex_bytes: int = param(16, unit="bytes", doc="attribute bytes fetched per vertex (a float4 position; a "
                               "lit mesh adds its normal)", min=0, max=1024)
+    vertex_source: Literal["device", "host"] = param(
+        "device", doc="where each draw's vertex and index arrays come from: device memory (vertex buffer objects, "
+                      "read at the DRAM channels' bandwidth) or host memory over the bus at host_bytes_per_cycle "
+                      "(OpenGL client-side arrays, or a mesh larger than device memory): 3 32-bit indices and "
+                      "half a vertex (a closed mesh's vertex array) per triangle, every draw")
+    host_bytes_per_cycle: float = param(6.17, unit="bytes/cycle", doc="host-to-GPU bus bandwidth, one way, per "
+                                        "core cycle (PCI Express x16: 4 GB/s at 1.x, 8 GB/s at 2.0, 31.5 GB/s at "
+                                        "4.0, 63 GB/s at 5.0)", gt=0)
     vertex_instructions: int = param(20, unit="instructions", doc="scalar instructions of the vertex program "
                                      "(modelview-projection transform 16 and its output writes)", min=0)
     vertex_lanes: int = param(0, unit="lanes", doc="scalar lanes of dedicated vertex shaders (0: a unified GPU, "
@@ -79,7 +96,10 @@ def per_triangle_cycles(gpu) -> float:
     """Cycles per triangle of the front end's per-triangle stages (fetch, vertex shading, setup): the slowest."""
     r, c = gpu.raster, gpu.core
     lanes = r.vertex_lanes or c.sms * c.lanes_per_sm
-    fetch = r.vertices_per_triangle * r.vertex_bytes / (gpu.dram.bytes_per_cycle * gpu.memory.partitions)
+    if r.vertex_source == "host":
+        fetch = (3 * HOST_INDEX_BYTES + MESH_VERTICES_PER_TRIANGLE * r.vertex_bytes) / r.host_bytes_per_cycle
+    else:
+        fetch = r.vertices_per_triangle * r.vertex_bytes / (gpu.dram.bytes_per_cycle * gpu.memory.partitions)
     shade = r.vertices_per_triangle * r.vertex_instructions / lanes
     return max(1.0 / r.triangles_per_cycle, fetch, shade)
 
