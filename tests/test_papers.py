@@ -238,6 +238,10 @@ def test_seed004_sp_ratios_within_1_5x():
     lucy = rows[("Table 1, Lucy (28.0M)", "4 RGBZ: SP / SPwH")]
     assert lucy.ratio == pytest.approx(10.0) and lucy.note.startswith("misses")
     assert rows[("Table 1, Lucy (28.0M)", "4 RGBZ: SP / MP")].met
+    assert rows[("Table 1, Lucy (28.0M)", "4 RGBZ: SP / MP")].note.endswith("; vertices in device memory")
+    # the experiment's assumption, vertices sent from host memory every draw, is said on every SP / MP row
+    host = by_key(paper004.compare(seed004_results().assign(**{"raster.vertex_source": "host"}), NO_STATS))
+    assert "from host memory over PCI Express (an assumption" in host[("Table 1, Dragon (871k)", "16 Z: SP / MP")].note
     # the multi-pass k-buffer's section: its passes and its rate against MP's and SP's for the same entries
     section = paper004.compare(seed004_results(), NO_STATS).sections[0]
     table = section.table.set_index(["dataset", "entries"])
