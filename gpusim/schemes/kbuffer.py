@@ -33,7 +33,9 @@ Modes:
 Heuristics of section 3.2, applied to the trace first: ``order = centroid``
 sorts primitives front to back by centroid depth (see gpusim.schemes.common.reorder);
 ``batch = N`` splits the primitives into batches of N with a pipeline flush
-(a ``flush`` pass with no memory operations) between. Both leave this
+(a ``flush`` pass with no memory operations) between; every submitted primitive
+counts, those that cover no pixel included (spread evenly through the centroid
+order, whose depths the trace does not hold). Both leave this
 functional result unchanged (peel) or improve it (sort-blend, by ordering);
 their cost and their effect on hazards are the timing model's to measure.
 
@@ -81,7 +83,7 @@ from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC,
                                                    check_entry, entry_bytes, entry_image, payload_bytes, per_access,
                                                    resolve_alpha, resolve_alu)
 from gpusim.schemes.common.kbuffer_replay import make_replay
-from gpusim.schemes.common.reorder import batch_index, batch_primitives, centroid_order, permuted
+from gpusim.schemes.common.reorder import batch_plan, centroid_order, permuted
 from gpusim.schemes.common.storage import ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
@@ -119,9 +121,8 @@ class KBuffer(Scheme):
 
         passes = [Pass("clear", "clear", "entry")]
         if self.batch:
-            batches = batch_index(t, np.arange(n), self.batch)
-            n_batches = int(batches.max()) + 1 if n else 0
-            prims = batch_primitives(t, batches, n_batches)
+            batches, prims = batch_plan(t, self.batch, self.order == "centroid")
+            n_batches = len(prims)
             for b in range(n_batches):
                 if b:
                     passes.append(Pass(f"flush {b}", "flush", "none"))

@@ -28,18 +28,32 @@ def centroid_order(trace: FragmentTrace) -> np.ndarray:
     return lex_order(prim_rank[inverse])
 
 
-def batch_index(trace: FragmentTrace, order: np.ndarray, batch_size: int) -> np.ndarray:
-    """Batch number of each fragment (in ``order``): batches of ``batch_size`` primitives in order."""
-    prim = trace.prim[order]
-    new_prim = np.r_[True, prim[1:] != prim[:-1]] if len(prim) else np.zeros(0, bool)
-    prim_seq = np.cumsum(new_prim) - 1
-    return prim_seq // batch_size
+def submitted_primitives(trace: FragmentTrace) -> int:
+    """Primitives the scene submitted: the trace's ``primitives`` metadata (the rasterizer's count, primitives
+    that cover no pixel included) when it covers the primitive ids, else the highest id + 1."""
+    seen = int(trace.prim.max()) + 1 if len(trace) else 0
+    meta = trace.meta.get("primitives")
+    return max(seen, int(meta)) if isinstance(meta, (int, np.integer)) and not isinstance(meta, bool) else seen
 
 
-def batch_primitives(trace: FragmentTrace, batches: np.ndarray, n_batches: int) -> np.ndarray:
-    """Primitives in each batch (``batches``: each fragment's batch, fragments in submission order)."""
-    new_prim = np.r_[True, trace.prim[1:] != trace.prim[:-1]] if len(trace) else np.zeros(0, bool)
-    return np.bincount(batches[new_prim], minlength=n_batches)
+def batch_plan(trace: FragmentTrace, batch_size: int, centroid: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(batch of each fragment, primitives submitted in each batch): every submitted primitive in batches of
+    ``batch_size`` (seed 004 section 5: "all the triangles ... 32 triangles per batch"), those that cover no
+    pixel included. ``trace`` is in submission order: with ``centroid`` its fragments are grouped by primitive
+    front to back (:func:`centroid_order`), and the primitives that cover no pixel, whose depth the trace does
+    not hold, are spread evenly through that order; otherwise a primitive's batch is its id // ``batch_size``."""
+    submitted = submitted_primitives(trace)
+    n_batches = -(-submitted // batch_size)
+    prims = np.minimum(batch_size, submitted - batch_size * np.arange(n_batches))
+    if not len(trace):
+        return np.zeros(0, np.int64), prims
+    if centroid:
+        prim = trace.prim
+        rank = np.cumsum(np.r_[True, prim[1:] != prim[:-1]]) - 1      # among the primitives with fragments
+        slot = rank * submitted // (int(rank[-1]) + 1)
+    else:
+        slot = trace.prim.astype(np.int64)
+    return slot // batch_size, prims
 
 
 def permuted(trace: FragmentTrace, order: np.ndarray) -> FragmentTrace:
