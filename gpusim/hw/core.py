@@ -12,11 +12,11 @@ the ``core.instructions_per_op`` ALU instructions around it hold the port for
 ``issue_cycles`` plus the ALU instructions' cycles; a :class:`Compute`
 instruction (triangle setup, a scheme's ALU work) for its own cycles. ALU
 instructions issue ``core.alu_issue_width`` per lane and cycle (1 on a scalar
-SIMT lane; a G71 pixel pipeline's two co-issuing vec4 units issue 4). An instruction that depends
-on the thread's previous result waits for it, and other warps of the SM issue
-meanwhile (latency hiding). A unit that cannot take an instruction yet (a full
-reorder buffer, a busy scoreboard cell) hands back a simpy event; the warp
-waits for it and issues the instruction again.
+SIMT lane; a G71 pixel pipeline's two co-issuing vec4 units issue 4). An
+instruction that depends on the thread's previous result waits for it, and
+other warps of the SM issue meanwhile (latency hiding). A unit that cannot
+take an instruction yet (a full reorder buffer, a busy scoreboard cell) hands
+back a simpy event; the warp waits for it and issues the instruction again.
 """
 
 from __future__ import annotations
