@@ -38,6 +38,7 @@ from gpusim.hw.unit import div, entry_unit, mod
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OPS, OpPlan
 from gpusim.schemes.common.arrays import rank_in_runs
+from gpusim.schemes.common.reorder import submitted_primitives
 
 #: operations whose result a later dependent operation waits for
 PRODUCES = frozenset({"load", "rmw_read", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
@@ -100,10 +101,9 @@ class Workload:
 
 def scene_triangles(trace) -> int:
     """Triangles the scene submits: the trace's ``primitives`` metadata (the rasterizer's count, triangles that
-    cover no pixel included) when it has one that covers its primitive ids, else the highest id + 1."""
-    seen = int(trace.prim.max()) + 1 if len(trace) else 0
-    meta = trace.meta.get("primitives")
-    return max(seen, int(meta)) if isinstance(meta, (int, np.integer)) and not isinstance(meta, bool) else seen
+    cover no pixel included) when it has one that covers its primitive ids, else the highest id + 1 (the count
+    the k-buffer's batches are made of, gpusim.schemes.common.reorder.submitted_primitives)."""
+    return submitted_primitives(trace)
 
 
 def thread_mapping(gpu, p) -> str:
