@@ -11,6 +11,7 @@ process or a dask worker on another machine.
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import time
@@ -219,3 +220,8 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
                 images["image-timed"] = rgb8(timed)
         outcomes.append(Outcome(run.run_id, "ok", "", figures, stats, rec, images))
     return outcomes
+            del timed
+            # the event model's processes, events and units refer to each other: reference cycles that hold
+            # the run's arrays until a full collection, which Python seldom makes; without this a sweep in
+            # one process (or one worker) grows by a run's memory per run until it is killed
+            gc.collect()
