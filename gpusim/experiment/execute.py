@@ -132,9 +132,10 @@ def functional_stat_rows(record: dict) -> list[dict]:
     """The functional model's stats in long form: (unit, stat, labels, value, value_unit, description).
 
     ``unit`` is who counts it: ``scheme`` (its structures, accesses and own stats) or ``metrics`` (image
-    error); :func:`timing_stat_rows` adds ``machine`` (cycles, passes, hazards) and the hardware units
-    (``dram``, ``atomic``, ``rop``, ...). ``labels`` are ``key=value`` pairs joined by commas
-    (``structure=depth_array,operation=load``). Wall times are left out: they are not results of the model.
+    error); :func:`trace_stat_rows` adds ``trace`` (the input's own counts) and :func:`timing_stat_rows`
+    ``machine`` (cycles, passes, hazards) and the hardware units (``dram``, ``atomic``, ``rop``, ...).
+    ``labels`` are ``key=value`` pairs joined by commas (``structure=depth_array,operation=load``). Wall times
+    are left out: they are not results of the model.
     """
     rows = []
     for name, size in record["footprint_bytes"].items():
@@ -156,6 +157,14 @@ def functional_stat_rows(record: dict) -> list[dict]:
         rows.append(_stat("metrics", name, record["error"][name], {"psnr": "dB", "differing_pixels": "pixels"}
                           .get(name, "1"), "image error against the exact reference"))
     return [r for r in rows if r is not None]
+
+
+def trace_stat_rows(trace) -> list[dict]:
+    """The trace's own counts in long form (unit ``trace``): the triangles its scene submitted (from its metadata;
+    none for a trace that does not say, such as a CSV import)."""
+    row = _stat("trace", "primitives_submitted", trace.meta.get("primitives"), "triangles",
+                "triangles the scene sent to the rasterizer (after any subdivision)")
+    return [row] if row is not None else []
 
 
 def timing_stat_rows(timing: dict) -> list[dict]:
@@ -197,7 +206,7 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
     except Exception as exc:                 # noqa: BLE001 - every run of the task fails with this line
         return [Outcome(r.run_id, "failed", one_line(exc)) for r in task.runs]
     image = rgb8(result.image)
-    base, base_stats = functional_figures(record), functional_stat_rows(record)
+    base, base_stats = functional_figures(record), functional_stat_rows(record) + trace_stat_rows(trace)
     outcomes = []
     for run in task.runs:
         rec = dict(record)
@@ -218,10 +227,10 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
             stats += timing_stat_rows(timing)
             if timed is not None:
                 images["image-timed"] = rgb8(timed)
-        outcomes.append(Outcome(run.run_id, "ok", "", figures, stats, rec, images))
-    return outcomes
             del timed
             # the event model's processes, events and units refer to each other: reference cycles that hold
             # the run's arrays until a full collection, which Python seldom makes; without this a sweep in
             # one process (or one worker) grows by a run's memory per run until it is killed
             gc.collect()
+        outcomes.append(Outcome(run.run_id, "ok", "", figures, stats, rec, images))
+    return outcomes
