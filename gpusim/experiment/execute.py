@@ -114,6 +114,9 @@ def timing_figures(timing: dict) -> dict[str, Any]:
     if timing.get("rmw_hazards") is not None:
         figures["hazards"] = timing["rmw_hazards"]
         figures["hazard_pixels"] = timing.get("rmw_hazard_pixels", math.nan)
+    for key in ("cycles_ci95_low", "cycles_ci95_high", "cycle_error_estimate"):     # the sampled level's
+        if key in timing:
+            figures[key] = timing[key]
     if "rmw_image_error" in timing:
         figures["rmse_timed"] = timing["rmw_image_error"]["rmse"]
         figures["differing_pixels_timed"] = timing["rmw_image_error"]["differing_pixels"]
@@ -183,6 +186,14 @@ def timing_stat_rows(timing: dict) -> list[dict]:
             for stat, value in summary.items():
                 rows.append(_stat(unit, stat, value, "cycles" if stat.endswith("cycles") else "1",
                                   f"{stat} of the {unit} units ({timing['fidelity']} estimate)"))
+    sample = timing.get("sample", {})
+    for key, value_unit, doc in (("replicates", "samples", "replicate samples"),
+                                 ("sms", "SMs", "SMs each replicate simulates"),
+                                 ("share", "1", "share of the GPU and of the work each replicate stands for"),
+                                 ("tiles", "tiles", "screen tiles with fragments"),
+                                 ("tiles_per_replicate", "tiles", "screen tiles each replicate samples")):
+        if key in sample:                       # the sampled level's sample
+            rows.append(_stat("sample", key, sample[key], value_unit, doc))
     for key in ("memory_cycles", "compute_cycles"):
         if key in timing:
             rows.append(_stat("machine", key, timing[key], "cycles", f"thesis model: {key.replace('_', ' ')}"))
