@@ -473,3 +473,20 @@ def test_report_images_use_each_traces_own_reference(tmp_path):
     text = write_report(tmp_path / "out").read_text()
     images = sorted(p.name for p in (tmp_path / "out" / "figures").glob("images-*.png"))
     assert len(images) == 2 and text.count("![images of default screen.background=") == 2
+
+
+def test_a_sweep_in_one_process_leaves_no_event_model_behind(tmp_path):
+    """The event model's objects form reference cycles; each run's are collected before the next run, so a
+    long sweep in one process (or one worker) holds one run's memory, not the sum of all of them."""
+    import gc
+
+    import simpy
+    path = write(tmp_path / "e.toml", 'scenes = ["default"]\nsize = "24x20"\nfidelity = ["full"]\n'
+                                      '[schemes.depth-peeling]\n[schemes.kbuffer]\nk = 2\n')
+    gc.disable()                 # only the sweep's own collections count
+    try:
+        run_experiment(load_experiment(str(path)), tmp_path / "out", workers=1, quiet=True)
+        alive = [o for o in gc.get_objects() if isinstance(o, simpy.Environment)]
+    finally:
+        gc.enable()
+    assert not alive

@@ -28,7 +28,8 @@ def add_parser(sub) -> None:
                    help="scheme parameter (repeatable), e.g. --param layers=8")
     p.add_argument("--fidelity", choices=sorted(FIDELITIES), metavar="LEVEL",
                    help="also run a timing model: analytic (bounds from work/throughput), sampled (event model "
-                        "on a sample of screen tiles), full (event model on everything, RMW hazards replayed "
+                        "on replicate samples of the work on a GPU cut down to a share of its SMs, with a 95%% "
+                        "confidence interval), full (event model on everything, RMW hazards replayed "
                         "into the image) or thesis (seed 003 section 4.3.2, for tfss, r-buffer and weight-factor)")
     p.add_argument("--gpu", metavar="PRESET|FILE", default=None,
                    help=f"GPU for the timing model: a preset ({', '.join(gpu_presets())}) or a .toml file "
@@ -117,6 +118,12 @@ def _timing_text(t: dict, add) -> None:
         return
     add(f"cycles       {t['cycles']:,} ({t['fidelity']} on {t['gpu']}: {t['microseconds']:,.1f} us; "
         f"{t['instructions']:,} warp instructions, {t['wall_seconds']:.2f} s)")
+    if "cycles_ci95_low" in t:
+        s = t["sample"]
+        add(f"  95% CI     {t['cycles_ci95_low']:,} to {t['cycles_ci95_high']:,} cycles (error estimate "
+            f"{t['cycle_error_estimate']:.1%}: standard error over the cycles, from {s['replicates']} replicates "
+            f"of {s['sms']} SM{'s' if s['sms'] != 1 else ''} each, {s['tiles_per_replicate']:,} of "
+            f"{s['tiles']:,} tiles)")
     for p in t["passes"][:12]:
         extra = f"  bound: {p['bound']}" if "bound" in p else ""
         add(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")

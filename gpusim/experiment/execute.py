@@ -11,6 +11,7 @@ process or a dask worker on another machine.
 
 from __future__ import annotations
 
+import gc
 import math
 import os
 import time
@@ -113,6 +114,9 @@ def timing_figures(timing: dict) -> dict[str, Any]:
     if timing.get("rmw_hazards") is not None:
         figures["hazards"] = timing["rmw_hazards"]
         figures["hazard_pixels"] = timing.get("rmw_hazard_pixels", math.nan)
+    for key in ("cycles_ci95_low", "cycles_ci95_high", "cycle_error_estimate"):     # the sampled level's
+        if key in timing:
+            figures[key] = timing[key]
     if "rmw_image_error" in timing:
         figures["rmse_timed"] = timing["rmw_image_error"]["rmse"]
         figures["differing_pixels_timed"] = timing["rmw_image_error"]["differing_pixels"]
@@ -131,9 +135,10 @@ def functional_stat_rows(record: dict) -> list[dict]:
     """The functional model's stats in long form: (unit, stat, labels, value, value_unit, description).
 
     ``unit`` is who counts it: ``scheme`` (its structures, accesses and own stats) or ``metrics`` (image
-    error); :func:`timing_stat_rows` adds ``machine`` (cycles, passes, hazards) and the hardware units
-    (``dram``, ``atomic``, ``rop``, ...). ``labels`` are ``key=value`` pairs joined by commas
-    (``structure=depth_array,operation=load``). Wall times are left out: they are not results of the model.
+    error); :func:`trace_stat_rows` adds ``trace`` (the input's own counts) and :func:`timing_stat_rows`
+    ``machine`` (cycles, passes, hazards) and the hardware units (``dram``, ``atomic``, ``rop``, ...).
+    ``labels`` are ``key=value`` pairs joined by commas (``structure=depth_array,operation=load``). Wall times
+    are left out: they are not results of the model.
     """
     rows = []
     for name, size in record["footprint_bytes"].items():
@@ -157,6 +162,14 @@ def functional_stat_rows(record: dict) -> list[dict]:
     return [r for r in rows if r is not None]
 
 
+def trace_stat_rows(trace) -> list[dict]:
+    """The trace's own counts in long form (unit ``trace``): the triangles its scene submitted (from its metadata;
+    none for a trace that does not say, such as a CSV import)."""
+    row = _stat("trace", "primitives_submitted", trace.meta.get("primitives"), "triangles",
+                "triangles the scene sent to the rasterizer (after any subdivision)")
+    return [row] if row is not None else []
+
+
 def timing_stat_rows(timing: dict) -> list[dict]:
     """A timing level's stats in long form (see :func:`functional_stat_rows`)."""
     rows = [_stat("machine", "cycles", timing["cycles"], "cycles", f"run time ({timing['fidelity']})")]
@@ -173,6 +186,14 @@ def timing_stat_rows(timing: dict) -> list[dict]:
             for stat, value in summary.items():
                 rows.append(_stat(unit, stat, value, "cycles" if stat.endswith("cycles") else "1",
                                   f"{stat} of the {unit} units ({timing['fidelity']} estimate)"))
+    sample = timing.get("sample", {})
+    for key, value_unit, doc in (("replicates", "samples", "replicate samples"),
+                                 ("sms", "SMs", "SMs each replicate simulates"),
+                                 ("share", "1", "share of the GPU and of the work each replicate stands for"),
+                                 ("tiles", "tiles", "screen tiles with fragments"),
+                                 ("tiles_per_replicate", "tiles", "screen tiles each replicate samples")):
+        if key in sample:                       # the sampled level's sample
+            rows.append(_stat("sample", key, sample[key], value_unit, doc))
     for key in ("memory_cycles", "compute_cycles"):
         if key in timing:
             rows.append(_stat("machine", key, timing[key], "cycles", f"thesis model: {key.replace('_', ' ')}"))
@@ -196,7 +217,7 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
     except Exception as exc:                 # noqa: BLE001 - every run of the task fails with this line
         return [Outcome(r.run_id, "failed", one_line(exc)) for r in task.runs]
     image = rgb8(result.image)
-    base, base_stats = functional_figures(record), functional_stat_rows(record)
+    base, base_stats = functional_figures(record), functional_stat_rows(record) + trace_stat_rows(trace)
     outcomes = []
     for run in task.runs:
         rec = dict(record)
@@ -217,5 +238,10 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
             stats += timing_stat_rows(timing)
             if timed is not None:
                 images["image-timed"] = rgb8(timed)
+            del timed
+            # the event model's processes, events and units refer to each other: reference cycles that hold
+            # the run's arrays until a full collection, which Python seldom makes; without this a sweep in
+            # one process (or one worker) grows by a run's memory per run until it is killed
+            gc.collect()
         outcomes.append(Outcome(run.run_id, "ok", "", figures, stats, rec, images))
     return outcomes

@@ -23,7 +23,7 @@ from gpusim.experiment.execute import Outcome, Task, TaskRun
 from gpusim.experiment.executors import make_executor, probe
 from gpusim.experiment.grid import GPU_LEVELS, RunSpec, expand, resolved_run, run_id
 from gpusim.experiment.spec import Experiment
-from gpusim.experiment.store import FIGURE_COLUMNS, LEAD_COLUMNS, ResultsStore
+from gpusim.experiment.store import FIGURE_COLUMNS, LEAD_COLUMNS, LEVEL_COLUMNS, ResultsStore
 from gpusim.hw.gpu import with_section
 
 
@@ -79,7 +79,7 @@ def describe_run(run: RunSpec) -> str:
 def _row(run: RunSpec, rid: str, outcome: Outcome | None, trace_info: dict) -> dict:
     """A run's row: ``skipped`` (with the reason) for a combination its scheme cannot run, ``pending`` for a
     run this sweep has not finished (yet: an interrupted sweep's table), else its outcome."""
-    reserved = set(LEAD_COLUMNS) | set(FIGURE_COLUMNS)
+    reserved = set(LEAD_COLUMNS) | set(FIGURE_COLUMNS) | set(LEVEL_COLUMNS)
     status = "skipped" if run.skip else outcome.status if outcome else "pending"
     row = {"run": rid, "status": status, "error": run.skip or (outcome.error if outcome else ""),
            "index": run.index, "scene": run.source.label,

@@ -37,6 +37,9 @@ FIGURE_COLUMNS = ("cycles", "microseconds", "wall_seconds_functional", "wall_sec
                   "footprint_used_bytes", "accesses", "geometry_passes", "passes", "dropped_fragments",
                   "overflowed_pixels", "hazards", "hazard_pixels", "rmse", "psnr", "differing_pixels",
                   "differing_share", "max_abs", "rmse_timed", "differing_pixels_timed", "fragments", "pixels")
+#: figures only some levels give (the sampled level's confidence interval and error estimate): among the
+#: figures, after ``microseconds``, in tables that have them
+LEVEL_COLUMNS = ("cycles_ci95_low", "cycles_ci95_high", "cycle_error_estimate")
 #: columns that hold wall times (the only ones allowed to differ between two runs of one experiment)
 WALL_COLUMNS = ("wall_seconds_functional", "wall_seconds_timing")
 STATS_COLUMNS = ("run", "unit", "stat", "labels", "value", "value_unit", "description")
@@ -176,7 +179,7 @@ def results_frame(rows: list[dict]) -> pd.DataFrame:
             frame[c] = pd.array([None if v is None or (isinstance(v, float) and math.isnan(v)) else int(v)
                                  for v in raw], dtype="Int64")
     lead = [c for c in LEAD_COLUMNS if c in frame]
-    figures = list(FIGURE_COLUMNS)
+    figures = [*FIGURE_COLUMNS[:2], *(c for c in LEVEL_COLUMNS if c in frame), *FIGURE_COLUMNS[2:]]
     stats = sorted(c for c in frame if c.startswith("stat."))
     axes = [c for c in frame if c not in lead and c not in figures and c not in stats]
     for c in figures:

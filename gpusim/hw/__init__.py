@@ -6,8 +6,9 @@ Fidelity levels are selected by name (``FIDELITIES``, ``gpusim replay
 
 * ``analytic``: per-pass bounds from work / throughput and latency chains
   (gpusim.hw.analytic), no events;
-* ``sampled``: the event model on a sample of screen tiles and on half of it,
-  each pass extrapolated along the line through the two (gpusim.hw.timing);
+* ``sampled``: the event model on replicate stratified samples of the work,
+  each on the GPU cut down to the sample's share of its SMs; their mean, and
+  a 95% confidence interval from their spread (gpusim.hw.sample);
 * ``full``: the event model on every operation, with RMW hazards replayed into
   the image;
 * ``thesis``: the execution-time model of seed 003 section 4.3.2

@@ -21,7 +21,7 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.hw.unit import (BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, address_ids, cycles, div, fp_costs,
-                            interleave, mod, register_unit)
+                            interleave, mod, occupancy, register_unit)
 from gpusim.metrics.composite import run_starts
 
 
@@ -65,6 +65,7 @@ class AtomicUnit(Unit):
         cost = fp_costs(nops[hit], config.ops_per_cycle)
         cell_wi, cell_part = div(hit, P), mod(hit, P)
         self.busy_fp = np.bincount(cell_part, weights=cost, minlength=P).astype(np.int64).tolist()
+        cost = occupancy(cost, prog.wi_pass[cell_wi], cell_part, prog, "atomic")   # a sampled program's: longer
         self.requests = np.bincount(cell_part, weights=nops[hit], minlength=P).astype(np.int64).tolist()
         # flat lists: instruction wi owns cells cells_of[wi]:cells_of[wi + 1]; cell j its lanes' address ids
         # lanes_of[j]:lanes_of[j + 1], grouped by cell (a stable sort: the lanes of one address, all in one
@@ -72,12 +73,20 @@ class AtomicUnit(Unit):
         self.cell_part, self.cell_cost = cell_part.tolist(), cost.tolist()
         self.cells_of = np.searchsorted(cell_wi, np.arange(prog.instructions + 1)).tolist()
         self.lanes_of = np.r_[0, np.cumsum(nops[hit])].tolist()
+        scale = prog.hold_scale
         if len(cell) > 1 and not (cell[1:] >= cell[:-1]).all():
-            addr = addr[np.argsort(cell, kind="stable")]
+            order = np.argsort(cell, kind="stable")
+            addr = addr[order]
+            scale = scale[order] if scale is not None else None
         self.addresses = addr                  # each lane's (the program's rows; kept for detached)
         ids, self.ops_per_address = address_ids(addr)
         self.lane_address = ids.tolist()
         self.address_free = [0] * (int(ids.max()) + 1 if len(ids) else 0)      # cycle each address is free
+        if scale is not None:
+            # a sample (gpusim.hw.sample) keeps a share of the operations on a shared word: each holds it as long
+            # as the run's operations on it over the sample's, so the word's chain lasts as long as the run's
+            self.lane_hold = np.maximum(1, np.rint(config.same_address_cycles * scale)).astype(np.int64).tolist()
+            self.serve = self._serve_sampled
 
     def serve(self, wi: int, now: int) -> int:
         arrive = (now + self.icn) * FP
@@ -102,6 +111,33 @@ class AtomicUnit(Unit):
                         last = held
         if last + hold > self.until:
             self.until = last + hold
+        return last + self.tail
+
+    def _serve_sampled(self, wi: int, now: int) -> int:
+        """:meth:`serve` with a hold of its own per lane (``lane_hold``)."""
+        arrive = (now + self.icn) * FP
+        free, address_free, lane_address, lane_hold = self.free, self.address_free, self.lane_address, self.lane_hold
+        cell_part, cell_cost, lanes_of = self.cell_part, self.cell_cost, self.lanes_of
+        last, until = 0, self.until
+        for j in range(self.cells_of[wi], self.cells_of[wi + 1]):
+            p = cell_part[j]
+            start = free[p] if free[p] > arrive else arrive
+            free[p] = start + cell_cost[j]
+            taken = -(-start // FP)
+            if taken > last:
+                last = taken
+            for i in range(lanes_of[j], lanes_of[j + 1]):
+                a = lane_address[i]
+                held = address_free[a]
+                if held > taken:             # the address is held: this lane waits for the last
+                    if held > last:
+                        last = held
+                else:
+                    held = taken
+                address_free[a] = end = held + lane_hold[i]
+                if end > until:
+                    until = end
+        self.until = until
         return last + self.tail
 
     def idle_at(self) -> int:

@@ -51,11 +51,19 @@ class RunnerConfig:
 
 @dataclass(frozen=True)
 class SampleConfig:
-    """The ``sampled`` fidelity level: the event model on a sample of screen tiles."""
+    """The ``sampled`` fidelity level (gpusim.hw.sample): the event model on replicate stratified samples of the
+    work, each on the GPU cut down to the sample's share of its SMs."""
 
-    tile: int = param(32, unit="pixels", doc="tile edge", min=1)
-    fraction: float = param(0.125, unit="1", doc="share of non-empty tiles simulated", gt=0, max=1)
-    seed: int = param(1, doc="random seed of the tile sample", min=0)
+    tile: int = param(8, unit="pixels", doc="edge of the screen tiles sampled (fragment and pixel threads)",
+                      min=1, max=4096)
+    fraction: float = param(0.03125, unit="1", doc="share of the GPU's SMs each replicate simulates, rounded to "
+                            "whole SMs (at least one), and the share of the work it samples; 1: the full level",
+                            gt=0, max=1)
+    replicates: int = param(4, unit="samples", doc="disjoint replicate samples; the estimate is their mean, its "
+                            "95% confidence interval from their spread (Student's t with replicates - 1 degrees "
+                            "of freedom); the level costs about replicates x fraction of the full level", min=2,
+                            max=64)
+    seed: int = param(1, doc="random seed of the samples", min=0)
 
 
 register_section("runner", RunnerConfig)

@@ -34,7 +34,7 @@ from gpusim.errors import GpusimError
 from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, quad_ids
 from gpusim.hw.scoreboard import scoreboard_cell
-from gpusim.hw.unit import div, entry_unit, mod
+from gpusim.hw.unit import div, entry_unit, interleave, mod
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OPS, OpPlan
 from gpusim.schemes.common.arrays import rank_in_runs
@@ -223,14 +223,30 @@ def _bits(n: int) -> int:
     return max(1, int(n).bit_length())
 
 
-def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None) -> Program:
+def plan_pieces(work: Workload, passes: tuple[int, int] | None = None) -> list[_Piece]:
+    """The rows of each group in each pass (of ``passes``, numbered from its first), before lanes are known;
+    :func:`lower` takes them (``pieces``) when it lowers several samples of one run."""
+    p_first = passes[0] if passes is not None else 0
+    pieces = [pc for gi, g in enumerate(work.plan.groups) for pc in _group_pieces(gi, g, work.bases, passes)]
+    for pc in pieces:                  # pass numbers of this program
+        pc.pass_index -= p_first
+    return pieces
+
+
+def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
+          pieces: list[_Piece] | None = None) -> Program:
     """Warp instructions of ``work.plan`` on ``gpu``.
 
-    ``keep(pass_index, threads) -> bool mask`` selects threads (the sampled
-    fidelity); a pass none of whose threads is kept runs whole. ``passes``:
+    ``keep(pass_index, threads) -> masks`` selects threads (the sampled
+    fidelity, gpusim.hw.sample): given a pass and the threads of each of its
+    groups, a mask per group; ``keep.triangles(ids)`` (when it has one) picks
+    the software rasterizer's triangles that cover no pixel. The kept share of
+    each shared unit's load and of the operations on an atomic word is
+    recorded (``Program.occupancy``, ``Program.hold_scale``). ``passes``:
     only the plan's passes ``passes[0]`` to ``passes[1] - 1``, as a program of
     their own (its pass 0 is the plan's ``passes[0]``); their instructions are
-    those the whole program gives them.
+    those the whole program gives them. ``pieces``: :func:`plan_pieces` of the
+    same ``work`` and ``passes``, made once for several samples.
     """
     plan = work.plan
     p_first, p_end = passes if passes is not None else (0, len(plan.passes))
@@ -244,21 +260,23 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None)
     ws = gpu.core.warp_size
     n_pass = p_end - p_first
     modes = [thread_mapping(gpu, p) for p in plan.passes[p_first:p_end]]
-    pieces = [pc for gi, g in enumerate(plan.groups) for pc in _group_pieces(gi, g, work.bases, passes)]
-    for pc in pieces:                  # pass numbers of this program
-        pc.pass_index -= p_first
+    pieces = list(pieces if pieces is not None else plan_pieces(work, passes))
     totals = np.zeros(n_pass, np.int64)
     for pc in pieces:
         totals[pc.pass_index] += pc.operations
     if keep is not None:
-        masks = [keep(pc.pass_index + p_first, pc.thread) for pc in pieces]
-        kept = np.zeros(n_pass, np.int64)
-        for pc, m in zip(pieces, masks):
-            kept[pc.pass_index] += int(m.sum()) if pc.instructions is None else 0
-        whole = (kept == 0) & (totals > 0)
+        masks: list = [None] * len(pieces)
+        for p, js in split_by(np.array([pc.pass_index for pc in pieces], np.int64)):
+            for j, m in zip(js, keep(p + p_first, [pieces[j].thread for j in js])):
+                masks[j] = m
+        words = _word_ops([pc for pc in pieces if pc.instructions is None
+                           and entry_unit(plan.groups[pc.group].op) == "atomic"])
+        occupancy = _occupancy(pieces, masks, plan, gpu, n_pass)
         for j, (pc, m) in enumerate(zip(pieces, masks)):
-            if not whole[pc.pass_index] and not m.all():
+            if not m.all():
                 pieces[j] = pc.take(np.flatnonzero(m))
+    else:
+        words = occupancy = None
     by_pass: list[list[_Piece]] = [[] for _ in range(n_pass)]
     for pc in pieces:
         if len(pc.thread):
@@ -268,6 +286,7 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None)
     units = tuple(dict.fromkeys(entry_unit(plan.groups[pc.group].op) for pc in pieces if pc.instructions is None))
     passes, inst = [], []
     rows: dict[str, list] = {}         # unit -> row arrays of its pieces
+    atomic_pass: list[int] = []        # the pass of each of the atomic unit's row arrays
     row_at: dict[str, int] = {}
     software = []                      # software-rasterizer passes: (pass, warps, setup cycles per warp,
                                        # triangle per lane)
@@ -292,11 +311,10 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None)
         for k in keys:
             present[k - key_lo] = True
         if mode == "triangle" and pk.primitives is None:
-            if keep is None:
+            if keep is None or not hasattr(keep, "triangles"):
                 present[:] = True
             else:
-                share = ops / max(1, int(totals[p]))
-                present |= hashed(np.arange(universe), int(share * 2**32))
+                present |= keep.triangles(np.arange(universe))
         lane_keys = np.flatnonzero(present) + key_lo
         n_lanes = len(lane_keys)
         # each key's lane rank (None: the key is its rank)
@@ -365,6 +383,8 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None)
             inst.append((*columns, start + at, np.append(start[1:], n) + at, np.full(len(start), p, np.int64),
                          np.full(len(start), gpu.core.op_issue_cycles, np.int64)))
             rows.setdefault(unit, []).append((OPS.index(plan.groups[pc.group].op), pc.address, pc.nbytes, pc.thread))
+            if unit == "atomic":
+                atomic_pass.append(p)
             row_at[unit] = at + n
         pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, warp0, operations=ops, operations_total=int(totals[p]))
         if mode == "fragment":           # the front end feeds the warps in triangle order
@@ -421,16 +441,59 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None)
                 np.insert(col, at_w, v) for col, v in zip((w, pa, g, k, lo, hi, wi_op, wi_unit, wi_dep, wi_cycles),
                                                           (sw, pass_of_warp, *values)))
     row_sets = {unit: Rows(parts) for unit, parts in rows.items()}
-    if keep is not None:
-        kept, total = sum(p.operations for p in passes), sum(p.operations_total for p in passes)
-        triangle_share = max(1, kept) / max(1, total)
-    else:
-        triangle_share = 1.0
     warp_wi_start = np.searchsorted(w, np.arange(warp0 + 1))
     for pp in passes:
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
     return Program(passes, units, lo, hi, wi_op, wi_unit, wi_cycles, wi_dep, (wi_op >= 0) & OP_PRODUCES[wi_op],
-                   w, pa, g, k, row_sets, work.frag_pixel, triangle_share)
+                   w, pa, g, k, row_sets, work.frag_pixel,
+                   occupancy=occupancy, hold_scale=_hold_scale(words, rows.get("atomic", []), atomic_pass))
+
+
+def _occupancy(pieces: list[_Piece], masks: list[np.ndarray], plan: OpPlan, gpu, n_pass: int) -> dict | None:
+    """A sample's ``Program.occupancy``: per shared unit, (passes, instances) factors, the whole run's load on
+    each instance in each pass (bytes on the memory partitions, operations on the atomic units and ROPs) over
+    the kept threads' (1 where they put none); None when every factor is 1."""
+    mem = gpu.memory
+    instances = {"coalescer": ("memory", mem.partitions), "atomic": ("atomic", mem.partitions),
+                 "rop": ("rop", gpu.rop.units)}
+    loads: dict[str, tuple] = {}
+    for pc, m in zip(pieces, masks):
+        unit = None if pc.instructions is not None else instances.get(entry_unit(plan.groups[pc.group].op))
+        if unit is None:
+            continue
+        name, n = unit
+        key = pc.pass_index * n + interleave(pc.address, mem.interleave_bytes, n)
+        weight = np.broadcast_to(np.asarray(pc.nbytes, np.float64) if name == "memory" else 1.0, key.shape)
+        every, kept = loads.setdefault(name, (np.zeros(n_pass * n), np.zeros(n_pass * n), n))[:2]
+        every += np.bincount(key, weights=weight, minlength=n_pass * n)
+        kept += np.bincount(key[m], weights=weight[m], minlength=n_pass * n)
+    out = {name: np.where(kept > 0, every / np.maximum(kept, 1e-9), 1.0).reshape(n_pass, n)
+           for name, (every, kept, n) in loads.items()}
+    return {k: v for k, v in out.items() if not (v == 1).all()} or None
+
+
+def _word_key(address, pass_index: int) -> np.ndarray:
+    """An atomic word in a pass, as one integer (addresses stay under 2**44 bytes)."""
+    return np.asarray(address, np.int64) + (np.int64(pass_index) << 44)
+
+
+def _word_ops(pieces: list[_Piece]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The atomic words (word key per pass, sorted) of the whole run and the operations on each."""
+    if not pieces:
+        return None
+    return np.unique(np.concatenate([_word_key(pc.address, pc.pass_index) for pc in pieces]), return_counts=True)
+
+
+def _hold_scale(words, parts: list, passes: list[int]) -> np.ndarray | None:
+    """Per kept atomic row, in the atomic unit's row order: the whole run's operations on its word in its pass
+    over the sample's (``words``: :func:`_word_ops` of the whole run); None when the sample keeps every
+    operation of each word it touches, or is no sample."""
+    if words is None or not parts:
+        return None
+    kept = np.concatenate([_word_key(part[1], p) for part, p in zip(parts, passes)])
+    mine, n_kept = np.unique(kept, return_counts=True)
+    ratio = words[1][np.searchsorted(words[0], kept)] / n_kept[np.searchsorted(mine, kept)]
+    return None if (ratio == 1).all() else ratio
 
 
 class Placement(NamedTuple):
@@ -505,10 +568,15 @@ def _quads_so_far(work: Workload, lane_keys: np.ndarray) -> np.ndarray:
     return np.cumsum(first)
 
 
+def hash32(values: np.ndarray, seed: int = 0) -> np.ndarray:
+    """A 32-bit multiplicative hash of integer ``values``."""
+    return (values * 2654435761 + seed * 97) & 0xFFFFFFFF
+
+
 def hashed(values: np.ndarray, below: int, seed: int = 0) -> np.ndarray:
     """A deterministic pseudo-random subset of integer ``values``: those whose 32-bit multiplicative hash is
     under ``below`` (``share * 2**32`` keeps about that share)."""
-    return ((values * 2654435761 + seed * 97) & 0xFFFFFFFF) < below
+    return hash32(values, seed) < below
 
 
 def submitted_triangles(pk, work: Workload) -> int:

@@ -152,7 +152,15 @@ class Program:
     wi_k: np.ndarray               # its iteration inside the group's loop
     row_sets: dict[str, Rows]      # unit name -> its rows
     frag_pixel: np.ndarray = field(repr=False, default=None)   # pixel of each fragment thread
-    triangle_share: float = 1.0    # share of each pass's triangles a sampled program submits (1: all)
+    # A sampled program (gpusim.hw.sample) stands for a whole run on a GPU cut down to some of its SMs; the
+    # shared units keep their instances and latencies. ``occupancy``: per shared unit ("memory": the memory
+    # partitions' levels, "atomic", "rop"), a (passes, instances) array: the run's load on each instance in each
+    # pass over the sample's (gpusim.hw.unit.occupancy). ``hold_scale``: per atomic row, the run's
+    # operations on its word in its pass over the sample's (a word's chain as long as in the run).
+    # ``front_end_cycles``: cycles per triangle of the whole GPU's front end. None: a whole run.
+    occupancy: dict[str, np.ndarray] | None = field(repr=False, default=None)
+    hold_scale: np.ndarray | None = field(repr=False, default=None)
+    front_end_cycles: float | None = None
 
     @property
     def instructions(self) -> int:

@@ -151,8 +151,10 @@ class Rasterizer(Unit):
     def __init__(self, config: RasterConfig, machine):
         super().__init__(1)
         prog = machine.program
-        # a sampled run submits its share of the triangles: the per-triangle stages get that much faster
-        self.per_triangle = per_triangle_cycles(machine.gpu) * prog.triangle_share
+        # a sampled program's front end is the whole GPU's: every pass submits all its triangles (the sampled
+        # warps wait for theirs), and only its quads are the sample's (gpusim.hw.sample)
+        self.per_triangle = (prog.front_end_cycles if prog.front_end_cycles is not None
+                             else per_triangle_cycles(machine.gpu))
         self.quad_rate = config.quads_per_cycle
         fe = [p for p in prog.passes if p.warp_triangles is not None]
         self.requests = [sum(p.triangles for p in fe)]

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.config import param
-from gpusim.hw.unit import BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, fp_cost, interleave, register_unit
+from gpusim.hw.unit import BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, fp_cost, interleave, occupancy, register_unit
 from gpusim.opplan import OPS
 
 PROGRAM_BLEND = OPS.index("program_blend")
@@ -85,6 +85,12 @@ class RopUnit(Unit):
         self.busy_fp = np.bincount(unit, weights=service, minlength=config.units).astype(np.int64).tolist()
         self.requests = np.bincount(unit, minlength=config.units).tolist()
         self.unit, self.pred, self.service = unit.tolist(), pred.tolist(), service.tolist()
+        # a sampled program (gpusim.hw.unit.occupancy): the rest of the GPU's operations that come with an
+        # instruction's hold its unit after them, before the next instruction's
+        held = occupancy(service, self.row_pass, unit, prog, "rop")
+        self.others = None if held is service else (held - service).tolist()
+        self.row_wi = wi_row.tolist() if self.others is not None else None
+        self.after, self.last = [0] * config.units, [-1] * config.units
         self.produces = prog.wi_produces.tolist()
         self.commit = [-1] * n                   # cycle, once known
         self.arrive = [-1] * n
@@ -145,9 +151,15 @@ class RopUnit(Unit):
         while stack:
             i = stack.pop()
             u, p = self.unit[i], self.pred[i]
+            others = self.others
+            if others is not None and self.last[u] != self.row_wi[i]:   # a sample: the other operations that
+                self.free[u] += self.after[u]                          # came with the instruction before
+                self.after[u], self.last[u] = 0, self.row_wi[i]
             start = max(self.arrive[i] * FP, self.free[u], (self.commit[p] * FP) if p >= 0 else 0)
             end = start + self.service[i]
             self.free[u] = end
+            if others is not None:
+                self.after[u] += others[i]
             self.commit[i] = c = -(-end // FP)
             if c + self.latency > self.drain:
                 self.drain = c + self.latency
@@ -189,8 +201,11 @@ class RopUnit(Unit):
         self.commit = np.where(np.isin(self.row_pass, list(indices)), -1, 0).tolist()
 
     def idle_at(self) -> int:
-        """The cycle the last committed operation's result is out (the buffers are empty at a pass end)."""
-        return self.drain
+        """The cycle the last committed operation's result is out (the buffers are empty at a pass end), and in a
+        sampled program the rest of the GPU's operations are done."""
+        if self.others is None:
+            return self.drain
+        return max(self.drain, -(-max(f + a for f, a in zip(self.free, self.after)) // FP))
 
     def blocked(self) -> list[str]:
         out = []

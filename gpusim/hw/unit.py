@@ -74,6 +74,17 @@ def interleave(address, granularity: int, instances: int):
     return mod(div(address, granularity), instances)
 
 
+def occupancy(cost_fp: np.ndarray, pass_of: np.ndarray, instance: np.ndarray, program, name: str) -> np.ndarray:
+    """How long requests of ``cost_fp`` sub-cycles in passes ``pass_of`` hold their ``instance`` of shared unit
+    ``name`` (a key of ``Program.occupancy``): as long as they are served in a whole run; in a sampled program
+    that times the run's load on the instance in the pass over the sample's (the rest of the GPU's traffic,
+    which reaches the instance as the sample's does), so each instance is as busy as in the run."""
+    factor = program.occupancy.get(name) if program.occupancy else None
+    if factor is None:
+        return cost_fp
+    return np.ceil(cost_fp * factor[pass_of, instance]).astype(np.int64)
+
+
 def address_ids(addr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each address as a small integer id, and the operations per distinct address.
 

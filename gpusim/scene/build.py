@@ -10,6 +10,7 @@ from gpusim.raster.batch import TriangleBatch
 from gpusim.scene import geometry
 from gpusim.scene.camera import look_at, model_matrix, perspective
 from gpusim.scene.model import Mesh, Scene
+from gpusim.scene.subdivide import subdivide
 
 
 def scene_triangles(scene: Scene, base_dir: Path = Path("."), where: str = "scene") -> TriangleBatch:
@@ -19,7 +20,7 @@ def scene_triangles(scene: Scene, base_dir: Path = Path("."), where: str = "scen
     view_proj = perspective(cam.fov_y_deg, aspect, cam.near, cam.far) @ look_at(cam.eye, cam.target, cam.up)
     light = np.asarray(scene.lighting.direction, dtype=np.float64)
     light = light / (np.linalg.norm(light) or 1.0)
-    batches = []
+    batches, world = [], []
     for i, obj in enumerate(scene.objects):
         if isinstance(obj, Mesh):
             data = geometry.mesh_file(obj, base_dir, f"{where}: objects[{i}]")
@@ -42,4 +43,19 @@ def scene_triangles(scene: Scene, base_dir: Path = Path("."), where: str = "scen
             rgba[:, 3] = 1.0
         batches.append(TriangleBatch(clip[data.faces], rgba[data.faces],
                                      np.full(len(data.faces), obj.opaque)))
-    return TriangleBatch.concat(batches)
+        if scene.subdivide_budget > 1.0:
+            world.append((homo @ model.T)[:, :3][data.faces])
+    batch = TriangleBatch.concat(batches)
+    if scene.subdivide_budget > 1.0:
+        batch = subdivided(batch, np.concatenate(world), scene.subdivide_budget)
+    return batch
+
+
+def subdivided(batch: TriangleBatch, world: np.ndarray, budget: float) -> TriangleBatch:
+    """``batch`` split by the seed 004 scheme (gpusim.scene.subdivide) to ``budget`` times its triangles,
+    lengths and aspect ratios measured on the (T, 3, 3) ``world`` corners. A new vertex's clip position and
+    colour are interpolated along the split edge, which leaves the surface, its depth and its perspective-
+    correct colours as they were; each triangle's pieces take its place in submission order."""
+    carried = np.concatenate([batch.clip, batch.rgba], axis=2)
+    _, carried, parent = subdivide(world, carried, budget)
+    return TriangleBatch(carried[..., :4], carried[..., 4:], batch.opaque[parent])

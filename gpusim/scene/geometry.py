@@ -13,6 +13,7 @@ import numpy as np
 
 from gpusim.errors import ConfigError
 from gpusim.scene import model as m
+from gpusim.scene.tetmesh import tet_ventricle
 
 
 @dataclass
@@ -184,4 +185,5 @@ def mesh_file(spec: m.Mesh, base_dir: Path, where: str) -> MeshData:
 
 
 GENERATORS = {"sphere": sphere, "box": box, "quad-grid": quad_grid,
-              "layered-quads": layered_quads, "sliver-fan": sliver_fan, "leaves": leaves}
+              "layered-quads": layered_quads, "sliver-fan": sliver_fan, "leaves": leaves,
+              "tet-ventricle": tet_ventricle}

@@ -182,6 +182,57 @@ class Leaves(ObjectSpec):
     seed: int = param(0, doc="seed of the placement")
 
 
+@_register("tet-ventricle")
+@dataclass(frozen=True, kw_only=True)
+class TetVentricle(ObjectSpec):
+    """A tetrahedral volume mesh of a heart ventricle, every tetrahedron face drawn as a transparent triangle.
+
+    The solid is a block of prolate spheroidal coordinates, cardiac mechanics' standard left-ventricle
+    geometry: x = focal cosh(lambda) cos(mu) (the long axis, apex at +x), y = focal sinh(lambda) sin(mu)
+    cos(theta), z = focal sinh(lambda) sin(mu) sin(theta), over ``lambda_range`` (the wall, cavity side
+    first), ``mu_range_deg`` (apex to base; an apex of 0 closes the tip) and ``theta_range_deg`` (a full
+    360 closes the ring). It is cut into ``divisions`` cells, each split into 6 tetrahedra (the Kuhn split,
+    conforming across cells); cells shrink in theta towards the apex and the tip's ring collapses, so
+    many tetrahedra are long and skinny. ``jitter`` moves each vertex off its grid point by up to that
+    fraction of a cell (seeded), never across the surface. Each face is drawn once. The colour blends from
+    ``inner_color`` on the cavity side to ``color`` outside; every vertex has the object's ``alpha``.
+    """
+
+    focal: float = param(1.0, unit="scene units", doc="focal distance of the prolate spheroidal coordinates",
+                         gt=0.0)
+    lambda_range: tuple[float, float] = param((0.6, 1.0), unit="1 (radial coordinate)",
+                                              doc="radial coordinate of the cavity side and of the outside")
+    mu_range_deg: tuple[float, float] = param((0.0, 120.0), unit="deg",
+                                              doc="angle from the long axis: apex end, base end")
+    theta_range_deg: tuple[float, float] = param((0.0, 360.0), unit="deg", doc="angle around the long axis")
+    divisions: tuple[int, int, int] = param((6, 100, 50), unit="cells",
+                                            doc="cells along lambda, mu and theta (6 tetrahedra each)")
+    jitter: float = param(0.3, unit="fraction of a cell", doc="largest move of a vertex off its grid point",
+                          min=0.0, max=0.45)
+    seed: int = param(0, doc="seed of the jitter")
+    inner_color: Vec3 = param((0.45, 0.05, 0.08), unit="RGB in [0,1]", doc="colour on the cavity side")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        lo, hi = self.lambda_range
+        if not 0.0 < lo < hi <= 4.0:
+            raise ValueError(f"lambda_range: {list(self.lambda_range)} must satisfy 0 < inner < outer <= 4, "
+                             "e.g. [0.6, 1.0]")
+        apex, base = self.mu_range_deg
+        if not 0.0 <= apex < base <= 180.0:
+            raise ValueError(f"mu_range_deg: {list(self.mu_range_deg)} must satisfy 0 <= apex < base <= 180, "
+                             "e.g. [0.0, 120.0]")
+        start, end = self.theta_range_deg
+        if not 0.0 < end - start <= 360.0:
+            raise ValueError(f"theta_range_deg: {list(self.theta_range_deg)} must span more than 0 and at most "
+                             "360 degrees, e.g. [0.0, 360.0]")
+        if any(not 1 <= d <= 1024 for d in self.divisions) or (end - start == 360.0 and self.divisions[2] < 3):
+            raise ValueError(f"divisions: {list(self.divisions)} must lie in 1..1024 (at least 3 around a closed "
+                             "ring), e.g. [6, 100, 50]")
+        if any(not 0.0 <= c <= 1.0 for c in self.inner_color):
+            raise ValueError("inner_color components must lie in [0, 1]")
+
+
 @_register("mesh")
 @dataclass(frozen=True, kw_only=True)
 class Mesh(ObjectSpec):
@@ -207,6 +258,9 @@ class Scene:
     lighting: Lighting = param(Lighting())
     raster: RasterOptions = param(RasterOptions())
     objects: tuple[ObjectSpec, ...] = param((), doc="objects in submission order")
+    subdivide_budget: float = param(1.0, unit="x the scene's triangles",
+                                    doc="split triangles, worst aspect ratio first, until the scene has this many "
+                                        "times its triangles (seed 004 section 4.3; 1: none)", min=1.0, max=64.0)
 
     def __post_init__(self) -> None:
         if not self.objects:

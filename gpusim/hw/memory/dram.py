@@ -35,7 +35,7 @@ class DramChannel(MemoryLevel):
     def __init__(self, config: DramConfig, machine):
         super().__init__(machine)
         self.rate, self.latency = config.bytes_per_cycle, config.latency
-        self._lo = self._hi = self._part = self._cost = None
+        self._lo = self._hi = self._part = self._cost = self._held = None
 
     def prepare(self, chunks: list[Requests], write: np.ndarray) -> None:
         """Per (instruction, partition): the bytes of its requests, served together (dense over each chunk)."""
@@ -65,9 +65,11 @@ class DramChannel(MemoryLevel):
         lo, hi = np.zeros(n, np.int64), np.zeros(n, np.int64)
         lo[order], hi[order] = bounds[:-1], bounds[1:]
         self._lo, self._hi, self._part, self._cost = lo.tolist(), hi.tolist(), part.tolist(), cost.tolist()
+        held = self.occupy(cost, order[rank], part)
+        self._held = self._cost if held is cost else held.tolist()
 
     def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
-        free, part, cost = self.free, self._part, self._cost
+        free, part, cost, held = self.free, self._part, self._cost, self._held
         end = 0
         for j in range(self._lo[wi], self._hi[wi]):
             p = part[j]
@@ -76,8 +78,8 @@ class DramChannel(MemoryLevel):
                 e = arrive_fp
             if starts is not None:
                 starts[p] = e                   # an instruction has one cell per partition it reaches
+            free[p] = e + held[j]
             e += cost[j]
-            free[p] = e
             if e > end:
                 end = e
         return -(-end // FP) + self.latency
@@ -85,10 +87,10 @@ class DramChannel(MemoryLevel):
     def request_costs(self, nbytes: np.ndarray) -> np.ndarray:
         return fp_costs(nbytes, self.rate)
 
-    def serve_request(self, partition: int, cost_fp: int, at_fp: int) -> int:
+    def serve_request(self, partition: int, cost_fp: int, at_fp: int, held_fp: int) -> int:
         free = self.free
         start = free[partition] if free[partition] > at_fp else at_fp
-        free[partition] = start + cost_fp
+        free[partition] = start + held_fp
         self.busy_fp[partition] += cost_fp
         self.requests[partition] += 1
         return -(-(start + cost_fp) // FP) + self.latency

@@ -57,6 +57,9 @@ class L2Slice(MemoryLevel):
         self.hits = [0] * self.instances
         self.misses = [0] * self.instances
         self.table: list = []
+        # a sampled program (gpusim.hw.unit.occupancy): what the rest of the GPU's requests add to a slice after
+        # the instruction that came with them, and that instruction
+        self.after, self.last = [0] * self.instances, [-1] * self.instances
 
     @classmethod
     def present(cls, config: L2Config) -> bool:
@@ -73,9 +76,11 @@ class L2Slice(MemoryLevel):
         address = np.concatenate([q.address for q in chunks])
         part = np.concatenate([q.partition for q in chunks])
         bounds = np.append(run_starts(wi), len(wi)).tolist()
-        reqs = list(zip(part.tolist(), div(address, self.line).tolist(), fp_costs(nbytes, self.rate).tolist(),
-                        self.next.request_costs(nbytes).tolist(),
-                        self.next.request_costs(nbytes + self.line).tolist()))
+        cost, miss, evict = (fp_costs(nbytes, self.rate), self.next.request_costs(nbytes),
+                             self.next.request_costs(nbytes + self.line))
+        held = [self.occupy(c, wi, part) for c in (cost, miss, evict)]
+        reqs = list(zip(part.tolist(), div(address, self.line).tolist(), cost.tolist(), miss.tolist(),
+                        evict.tolist(), *(h.tolist() for h in held)))
         first = wi[bounds[:-1]].tolist()
         w_ = write.tolist()
         for i, a, b in zip(first, bounds[:-1], bounds[1:]):
@@ -103,24 +108,35 @@ class L2Slice(MemoryLevel):
         reqs, write = self.table[wi]
         free, busy, requests, nxt, latency = self.free, self.busy_fp, self.requests, self.next, self.latency
         done = 0
-        for p, line, cost, miss_cost, evict_cost in reqs:
+        after = self.after
+        for p, line, cost, miss_cost, evict_cost, held, miss_held, evict_held in reqs:
             start = free[p]
+            if after[p] and self.last[p] != wi:     # a sample: the rest of the GPU's requests that came with
+                start += after[p]                    # the instruction before
+                after[p] = 0
             if start < arrive_fp:
                 start = arrive_fp
             if starts is not None and starts[p] < 0:
                 starts[p] = start
             end = start + cost
             free[p] = end
+            if held != cost:
+                after[p] += held - cost
+                self.last[p] = wi
             busy[p] += cost
             requests[p] += 1
             hit, evict = self.lookup(p, line, write)
             if hit:
                 finish = -(-end // FP) + latency
             else:
-                finish = nxt.serve_request(p, evict_cost if evict else miss_cost, end) + latency
+                finish = nxt.serve_request(p, evict_cost if evict else miss_cost, end,
+                                           evict_held if evict else miss_held) + latency
             if finish > done:
                 done = finish
         return done
+
+    def idle_at(self) -> int:
+        return -(-max(f + a for f, a in zip(self.free, self.after)) // FP)
 
     def values(self, total_cycles: int) -> dict:
         return super().values(total_cycles) | {"hits": list(self.hits), "misses": list(self.misses)}

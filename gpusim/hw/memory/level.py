@@ -26,7 +26,7 @@ from typing import ClassVar
 import numpy as np
 
 from gpusim.config import param
-from gpusim.hw.unit import Unit, register_section
+from gpusim.hw.unit import Unit, occupancy, register_section
 
 MEMORY_OPS = frozenset({"load", "store", "rmw_read", "rmw_write"})
 SECTOR = 32     # bytes: the granularity of a request's size
@@ -76,6 +76,14 @@ class MemoryLevel(Unit):
         super().__init__(machine.gpu.memory.partitions)
         self.next: MemoryLevel | None = machine.level_after(self.name)
         self.free = [0] * self.instances      # sub-cycle each instance is free
+        self.program = getattr(machine, "program", None)
+
+    def occupy(self, cost_fp: np.ndarray, wi: np.ndarray, partition: np.ndarray) -> np.ndarray:
+        """How long requests of ``cost_fp`` from instructions ``wi`` hold ``partition`` (gpusim.hw.unit.occupancy:
+        their cost, in a sampled program the run's share of the partition's traffic)."""
+        if self.program is None or self.program.occupancy is None:
+            return cost_fp
+        return occupancy(cost_fp, self.program.wi_pass[wi], partition, self.program, "memory")
 
     @classmethod
     def needed(cls, program, gpu) -> bool:
@@ -97,7 +105,9 @@ class MemoryLevel(Unit):
     def request_costs(self, nbytes: np.ndarray) -> np.ndarray:
         raise NotImplementedError(f"{self.name} cannot sit behind a level that sends single requests")
 
-    def serve_request(self, partition: int, cost_fp: int, at_fp: int) -> int:
+    def serve_request(self, partition: int, cost_fp: int, at_fp: int, held_fp: int) -> int:
+        """Serve one request of ``cost_fp`` sub-cycles arriving at ``at_fp``; it holds the partition ``held_fp``
+        (:meth:`occupy`); the cycle its data is back."""
         raise NotImplementedError(f"{self.name} cannot sit behind a level that sends single requests")
 
     def idle_at(self) -> int:

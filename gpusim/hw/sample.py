@@ -1,0 +1,320 @@
+"""The ``sampled`` fidelity level: replicate stratified samples of the work, each on a scaled-down GPU.
+
+The method, its assumptions and its measured error are in docs/timing-model.md ("The sampled level").
+
+* The machine. A replicate runs ``m = max(1, round(sample.fraction x core.sms))``
+  SMs, a share ``s = m / core.sms`` of the GPU, on a share ``s`` of the work.
+  The SMs are whole (each with the GPU's warp slots and lanes: latency hiding
+  per SM as in the run). Every other unit keeps all its instances (memory
+  partitions, atomic units, ROPs: the same address interleaving, so the same
+  hot partitions) and its latencies, and a request occupies it ``1/s`` as long
+  as it is served (``Program.share``: the rest of the GPU's traffic); the quad
+  rasterizer runs at ``s`` of its rate, an L2 slice holds ``s`` of its lines,
+  the scoreboard ``s`` of its cells. The geometry front end is the GPU's: every
+  pass submits all its triangles and a warp starts when its own are out.
+  Operations on an atomic word of which the sample keeps only some hold it as
+  long as all of them (``Program.hold_scale``): a global counter's chain is as
+  long as in the run, a pixel's (kept whole) unchanged.
+* The sample. Sampling units: screen tiles (``sample.tile`` pixels square) for
+  the fragment threads of the graphics pipeline and for pixel threads; blocks
+  of ``warp_size`` consecutive triangles for a software rasterizer's triangle
+  threads (whole triangles and whole warps, so its loads coalesce as in the
+  run); blocks of ``warp_size`` consecutive threads for the others (memory
+  entries). Tiles and triangle blocks are stratified by their fragments: ranked,
+  cut into ``round(s x units)`` strata of equal count, and each replicate takes
+  one unit of each stratum at random, each replicate another one while the
+  stratum has enough: the ``sample.replicates`` replicates are disjoint
+  stratified samples of one design. Thread blocks: each replicate a disjoint
+  pseudo-random share ``s``. A pass of which a replicate keeps no thread keeps
+  one unit's threads (its latency chain is the pass's floor).
+* The estimate. Each replicate's pass cycles estimate the run's: the level
+  reports their mean, per pass and in all, and from the replicates' totals
+  ``T_1..T_R`` the standard error ``SE = sd(T) / sqrt(R)``, the 95% confidence
+  interval ``mean +- t(0.975, R - 1) x SE`` (``cycles_ci95_low``,
+  ``cycles_ci95_high``) and ``cycle_error_estimate = SE / mean``. The interval
+  covers the sample's draw; the scaled machine's own bias (a pass's tail on
+  few SMs) is not in it: the fidelity corpus (configs/experiments/fidelity.toml)
+  measures how often it holds the full level's cycles.
+* Hazards, requests and busy cycles: each replicate's over the share of the
+  work it kept (RMW fragments for hazards, operations for the units), averaged.
+
+A fraction of 1 makes the machine the GPU and every replicate the whole run:
+the full level's figures, and an interval of zero width.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from gpusim.hw.lower import Workload, lower, plan_pieces, thread_mapping
+from gpusim.hw.program import Program
+from gpusim.hw.raster import per_triangle_cycles
+from gpusim.opplan import OPS
+
+#: unit figures that add up over the work (a sample's are scaled up by its share); the others are kept as they are
+ADDITIVE = ("requests", "busy_cycles", "bytes", "hits", "misses", "stalls", "overflows", "addresses")
+
+
+def t_quantile(p: float, dof: int) -> float:
+    """The ``p`` quantile (0.5 < p < 1) of Student's t distribution with ``dof`` >= 1 degrees of freedom:
+    bisection on its closed-form distribution function for integer degrees of freedom (Abramowitz and Stegun
+    26.7.3-4)."""
+    if not 0.5 < p < 1 or dof < 1:
+        raise ValueError(f"t_quantile: p must lie in (0.5, 1) and dof be >= 1, got p={p}, dof={dof}")
+
+    def central(t: float) -> float:          # P(|T| <= t)
+        theta = math.atan(t / math.sqrt(dof))
+        c2, s = math.cos(theta) ** 2, math.sin(theta)
+        if dof % 2:
+            term, total = math.cos(theta), 0.0
+            for k in range(1, (dof - 1) // 2 + 1):
+                total += term
+                term *= c2 * (2 * k) / (2 * k + 1)
+            return 2 / math.pi * (theta + s * total)
+        term, total = 1.0, 0.0
+        for k in range(1, dof // 2 + 1):
+            total += term
+            term *= c2 * (2 * k - 1) / (2 * k)
+        return s * total
+
+    target, lo, hi = 2 * p - 1, 0.0, 1.0
+    while central(hi) < target:
+        hi *= 2
+    for _ in range(100):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if central(mid) < target else (lo, mid)
+    return (lo + hi) / 2
+
+
+def sampled_sms(gpu) -> int:
+    """SMs a replicate of the sampled level simulates."""
+    return max(1, min(gpu.core.sms, round(gpu.sample.fraction * gpu.core.sms)))
+
+
+def scaled_gpu(gpu, sms: int):
+    """``gpu`` cut down to ``sms`` of its SMs: the quad rasterizer's rate, the L2 slices' lines, the scoreboard's
+    cells and the atomic units' rate in the same share (the other units' share is ``Program.share``)."""
+    if sms == gpu.core.sms:
+        return gpu
+    s = sms / gpu.core.sms
+    r = dataclasses.replace
+    sections = {"core": r(gpu.core, sms=sms), "raster": r(gpu.raster, quads_per_cycle=gpu.raster.quads_per_cycle * s),
+                "scoreboard": r(gpu.scoreboard, entries=max(gpu.core.warp_size, round(gpu.scoreboard.entries * s)))}
+    if gpu.l2.size_bytes:
+        sets = gpu.l2.size_bytes // (gpu.l2.line_bytes * gpu.l2.ways)
+        sections["l2"] = r(gpu.l2, size_bytes=max(1, round(sets * s)) * gpu.l2.line_bytes * gpu.l2.ways)
+    return gpu.replace(**sections)
+
+
+def _stratified(weight: np.ndarray, present: np.ndarray, share: float, replicates: int,
+                rng: np.random.Generator, certain: int) -> np.ndarray:
+    """``(replicates, units)`` masks: the present units ranked by ``weight`` (ties at random) and cut into
+    ``round(share x units)`` strata of equal count; replicate ``r`` takes the stratum's ``r``-th unit in a random
+    order (cycling when the stratum has fewer), except that every replicate takes unit ``certain`` in its
+    stratum (-1: none)."""
+    units = np.flatnonzero(present)
+    n = len(units)
+    out = np.zeros((replicates, len(present)), bool)
+    if not n:
+        return out
+    k = max(1, min(n, round(share * n)))
+    ranked = units[np.lexsort((rng.random(n), weight[units]))]
+    stratum = np.arange(n) * k // n
+    first_key = np.where(ranked == certain, -1.0, rng.random(n))     # the certain unit first in its stratum
+    ranked = ranked[np.lexsort((first_key, stratum))]               # a random order within each stratum
+    first = np.searchsorted(stratum, np.arange(k))
+    size = np.diff(np.append(first, n))
+    for r in range(replicates):
+        pick = first + r % size
+        out[r, ranked[np.where(ranked[first] == certain, first, pick)]] = True
+    return out
+
+
+class Replicates:
+    """The sampling units of a run and the replicates' choice of them (see the module docstring)."""
+
+    def __init__(self, work: Workload, gpu, share: float):
+        c, ws = gpu.sample, gpu.core.warp_size
+        self.work, self.gpu, self.share, self.count, self.seed = work, gpu, share, c.replicates, c.seed
+        self.tiles_x = -(-work.width // c.tile)
+        rng = np.random.default_rng(c.seed)
+        pixel, prims = work.frag_pixel, work.frag_prim
+        self.depth = np.bincount(pixel, minlength=work.width * work.height)
+        # the deepest pixel's tile and the largest triangle's block are in every replicate: the longest chains of
+        # dependent operations (a pixel's list, a triangle thread's loop) decide a latency-bound pass
+        self.deepest = int(self.depth.argmax()) if len(pixel) else -1
+        frag_tiles = np.bincount(self.tile_of(pixel), minlength=self.tiles_x * -(-work.height // c.tile))
+        self.tiles = _stratified(frag_tiles, frag_tiles > 0, share, self.count, rng,
+                                 int(self.tile_of(self.deepest)) if len(pixel) else -1)
+        triangles = max(work.triangles, int(prims.max()) + 1 if len(prims) else 0)
+        per_triangle = np.bincount(prims, minlength=triangles)
+        blocks = -(-triangles // ws)
+        self.triangles = _stratified(np.bincount(np.arange(triangles) // ws, weights=per_triangle,
+                                                 minlength=blocks), np.ones(blocks, bool), share, self.count, rng,
+                                     int(per_triangle.argmax()) // ws if len(prims) else -1)
+        self.lanes: dict[int, tuple] = {}        # pass -> its lanes and the replicates' choice of their warps
+        self.info = {"tiles": int((frag_tiles > 0).sum()), "tiles_per_replicate": int(self.tiles[0].sum()),
+                     "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
+
+    def tile_of(self, pixel):
+        tile = self.gpu.sample.tile
+        return (pixel // self.work.width // tile) * self.tiles_x + (pixel % self.work.width) // tile
+
+    def warps(self, p: int, threads: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """A pass whose threads fill warps in order: its lanes (sorted) and the replicates' choice of its warps,
+        stratified by their fragments (pixel threads) or their position (others)."""
+        if p not in self.lanes:
+            lanes = np.unique(np.concatenate(threads))
+            ws = self.gpu.core.warp_size
+            n = -(-len(lanes) // ws)
+            pixels = self.work.plan.passes[p].threads == "pixel"
+            weight = (np.bincount(np.arange(len(lanes)) // ws, weights=self.depth[lanes], minlength=n) if pixels
+                      else np.arange(n))
+            certain = int(np.searchsorted(lanes, self.deepest)) // ws if pixels and self.deepest in lanes else -1
+            self.lanes[p] = lanes, _stratified(weight, np.ones(n, bool), self.share, self.count,
+                                               np.random.default_rng([self.seed, p]), certain)
+        return self.lanes[p]
+
+
+class Keep:
+    """Replicate ``r``'s choice of threads, as :func:`gpusim.hw.lower.lower` asks for it: per pass, whole
+    screen tiles (graphics-pipeline fragment threads), whole blocks of triangles (a software rasterizer's), or
+    whole warps of the run (threads that fill warps in order); a pass it would keep none of keeps one such
+    unit."""
+
+    def __init__(self, reps: Replicates, r: int):
+        self.reps, self.r = reps, r
+
+    def __call__(self, p: int, threads: list[np.ndarray]) -> list[np.ndarray]:
+        reps, r = self.reps, self.r
+        ws = reps.gpu.core.warp_size
+        mapping = thread_mapping(reps.gpu, reps.work.plan.passes[p])
+        if mapping == "triangle":
+            units, chosen = [reps.work.frag_prim[t] // ws for t in threads], reps.triangles[r]
+        elif mapping == "fragment":
+            units, chosen = [reps.tile_of(reps.work.frag_pixel[t]) for t in threads], reps.tiles[r]
+        else:
+            lanes, warps = reps.warps(p, threads)
+            units, chosen = [np.searchsorted(lanes, t) // ws for t in threads], warps[r]
+        masks = [chosen[u] for u in units]
+        if not any(m.any() for m in masks):       # none kept: one of the pass's units, picked at random
+            every = np.concatenate(units)
+            if len(every):
+                one = every[np.random.default_rng([reps.seed, r, p]).integers(len(every))]
+                masks = [u == one for u in units]
+        return masks
+
+    def triangles(self, ids: np.ndarray) -> np.ndarray:
+        """A software rasterizer's triangles (covering a pixel or not) in the replicate's triangle blocks."""
+        return self.reps.triangles[self.r][ids // self.reps.gpu.core.warp_size]
+
+
+def rmw_threads(source, work: Workload) -> tuple[int, int]:
+    """Fragment threads with an ``rmw_read``, and their pixels: of an OpPlan, or of a lowered (sampled)
+    Program."""
+    if isinstance(source, Program):
+        rows = source.rows_of("coalescer")
+        threads = rows.thread[rows.op == OPS.index("rmw_read")] if len(rows) else np.zeros(0, np.int64)
+    else:
+        parts = [g.thread_ids() for g in source.groups if g.op == "rmw_read"]
+        threads = np.concatenate(parts) if parts else np.zeros(0, np.int64)
+    threads = np.unique(threads)
+    return len(threads), len(np.unique(work.frag_pixel[threads])) if len(threads) else 0
+
+
+def _replicate(work: Workload, small, program: Program, rmw_all: tuple[int, int]) -> dict:
+    """One replicate's figures, each scaled up to the whole run."""
+    from gpusim.hw.timing import run_full
+    rec, _ = run_full(work, small, program=program)
+    kept = sum(p.operations for p in program.passes)
+    total = sum(p.operations_total for p in program.passes)
+    w = kept / total if total else 1.0
+    out = {"cycles": [p["cycles"] for p in rec["passes"]], "instructions": rec["instructions"] / w,
+           "warps": [p["warps"] * (pp.operations_total / pp.operations if pp.operations else 1)
+                     for p, pp in zip(rec["passes"], program.passes)],
+           "operations_sampled": kept, "operations": total, "units_built": rec["units_built"], "units": {}}
+    for name, u in rec["units"].items():
+        scale = 1.0 if name == "raster" else 1 / w    # the front end takes every triangle
+        out["units"][name] = {k: v * scale if k in ADDITIVE else v for k, v in u.items()}
+    rmw_kept = rmw_threads(program, work)
+    for key, every, mine in zip(("rmw_hazards", "rmw_hazard_pixels"), rmw_all, rmw_kept):
+        out[key] = min(every, rec.get(key, 0) * every / mine) if mine else 0
+    return out
+
+
+def _units(runs: list[dict], gpu, cycles: int) -> dict:
+    """The replicates' unit figures averaged; utilisation from the averaged busy cycles over the GPU's
+    instances (the SMs: all of them), the busiest instance's as the replicates' busiest over their mean."""
+    out = {}
+    for name in dict.fromkeys(n for run in runs for n in run["units"]):
+        have = [run["units"][name] for run in runs if name in run["units"]]
+        u = {}
+        for key in have[0]:
+            values = [h[key] for h in have if isinstance(h.get(key), (int, float))]
+            if key.startswith("utilisation") or len(values) < len(have):
+                continue
+            mean = sum(values) / len(values)
+            u[key] = mean if key in ("busy_cycles", "hit_rate") else round(mean)
+        if name == "core":
+            u["instances"] = gpu.core.sms
+        if "busy_cycles" in u:
+            u["utilisation_mean"] = u["busy_cycles"] / (u["instances"] * cycles) if cycles else 0.0
+            spread = [h["utilisation_max"] / h["utilisation_mean"] for h in have if h.get("utilisation_mean")]
+            u["utilisation_max"] = u["utilisation_mean"] * (sum(spread) / len(spread) if spread else 1.0)
+        out[name] = u
+    return out
+
+
+def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict, None]:
+    """The sampled level on ``work``: (record, None); see the module docstring."""
+    start = time.perf_counter()
+    sms = sampled_sms(gpu)
+    share = sms / gpu.core.sms
+    small = scaled_gpu(gpu, sms)
+    reps = Replicates(work, gpu, share)
+    front = per_triangle_cycles(gpu)
+    rmw_all = rmw_threads(work.plan, work)
+    pieces = plan_pieces(work)
+    runs: list[dict] = []
+    for r in range(reps.count):
+        if share >= 1 and runs:              # every replicate is the whole run: the same figures
+            runs.append(runs[0])
+            continue
+        program = dataclasses.replace(lower(work, small, Keep(reps, r), pieces=pieces), front_end_cycles=front)
+        for pp in program.passes:        # a flush's full-screen quad: each SM its share of the GPU's warps
+            pp.flush_warps = -(-pp.flush_warps // gpu.core.sms) * sms
+        runs.append(_replicate(work, small, program, rmw_all))
+    n = len(runs)
+    per_pass = np.array([run["cycles"] for run in runs], np.float64)       # (replicates, passes)
+    totals = per_pass.sum(axis=1)
+    mean = float(totals.mean())
+    se = float(totals.std(ddof=1) / math.sqrt(n))
+    t = t_quantile(0.975, n - 1)
+    warps = np.mean([run["warps"] for run in runs], axis=0)
+    passes = [{"name": p.name, "kind": p.kind, "cycles": int(round(c)), "warps": int(round(wp)),
+               "replicate_cycles": [int(x) for x in per_pass[:, i]]}
+              for i, (p, c, wp) in enumerate(zip(work.plan.passes, per_pass.mean(axis=0), warps))]
+    cycles = sum(p["cycles"] for p in passes)
+    rec = {"fidelity": "sampled", "gpu": gpu.name,
+           "instructions": int(round(np.mean([run["instructions"] for run in runs]))),
+           "operations": int(runs[0]["operations"]), "passes": passes,
+           "units_built": list(dict.fromkeys(u for run in runs for u in run["units_built"])),
+           "units": _units(runs, gpu, cycles)}
+    for key in ("rmw_hazards", "rmw_hazard_pixels"):
+        rec[key] = int(round(np.mean([run[key] for run in runs])))
+    rec["cycles_ci95_low"] = int(math.floor(min(cycles, mean - t * se)))
+    rec["cycles_ci95_high"] = int(math.ceil(max(cycles, mean + t * se)))
+    rec["cycles_std_error"] = se
+    rec["cycle_error_estimate"] = se / mean if mean else 0.0
+    rec["sample"] = {"tile": gpu.sample.tile, "fraction": gpu.sample.fraction, "seed": gpu.sample.seed,
+                     "replicates": n, "sms": sms, "share": share, "t_quantile": t, **reps.info,
+                     "operations_sampled": [int(run["operations_sampled"]) for run in runs],
+                     "replicate_cycles": [int(x) for x in totals]}
+    rec["event_seconds"] = time.perf_counter() - start
+    rec["cycles"] = int(cycles)
+    rec["microseconds"] = cycles / gpu.core.clock_mhz
+    return rec, None

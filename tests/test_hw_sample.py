@@ -1,0 +1,119 @@
+"""The sampled fidelity level (gpusim.hw.sample): replicate stratified samples on a GPU cut down to a share of its
+SMs, the 95% confidence interval from the replicates, and the whole run when the fraction is 1."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gpusim.errors import ConfigError
+from gpusim.hw import load_gpu
+from gpusim.hw.lower import Workload, lower, plan_pieces
+from gpusim.hw.sample import Keep, Replicates, sampled_sms, scaled_gpu, t_quantile
+from gpusim.replay import replay, run_functional
+from gpusim.scene import load_scene, trace_scene
+
+
+@pytest.fixture(scope="module")
+def spheres():
+    """Ten nested spheres at 64x64 (depth complexity up to 20)."""
+    scene, base = load_scene("nested-spheres", ["screen.width=64", "screen.height=64"])
+    return trace_scene(scene, base, progress=False)
+
+
+@pytest.mark.parametrize("dof, quantile", [(1, 12.7062), (2, 4.3027), (3, 3.1824), (4, 2.7764), (10, 2.2281),
+                                           (30, 2.0423)])
+def test_t_quantile_is_students(dof, quantile):
+    # the two-sided 95% points of Student's t (any statistics table)
+    assert t_quantile(0.975, dof) == pytest.approx(quantile, abs=1e-4)
+    assert t_quantile(0.95, 1) == pytest.approx(6.3138, abs=1e-4)
+
+
+@pytest.mark.parametrize("scheme, params", [("kbuffer", {"k": 8}), ("freepipe-abuffer", {}), ("linked-list", {}),
+                                            ("depth-peeling", {})])
+def test_a_fraction_of_one_is_the_full_level_with_a_zero_width_interval(spheres, scheme, params):
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    whole = load_gpu("gtx280", ["runner.workers=1", "sample.fraction=1"])
+    full = replay(spheres, scheme, params, "full", gpu)[1]["timing"]
+    sampled = replay(spheres, scheme, params, "sampled", whole)[1]["timing"]
+    assert sampled["cycles"] == full["cycles"]
+    assert [p["cycles"] for p in sampled["passes"]] == [p["cycles"] for p in full["passes"]]
+    assert sampled["cycles_ci95_low"] == sampled["cycles_ci95_high"] == full["cycles"]
+    assert sampled["cycle_error_estimate"] == 0
+    assert sampled["rmw_hazards"] == full["rmw_hazards"]
+    for name, unit in full["units"].items():
+        for key in ("requests", "busy_cycles"):
+            if key in unit:
+                assert sampled["units"][name][key] == pytest.approx(unit[key]), (name, key)
+    # a smaller fraction is another figure, inside its own interval's reach of the full one's order
+    part = replay(spheres, scheme, params, "sampled", gpu)[1]["timing"]
+    assert part["sample"]["sms"] == 1 and part["cycles_ci95_low"] <= part["cycles"] <= part["cycles_ci95_high"]
+    assert 0.5 < part["cycles"] / full["cycles"] < 2
+
+
+def test_replicates_are_disjoint_stratified_samples(spheres):
+    gpu = load_gpu("gtx280", ["sample.fraction=0.0625"])
+    result, _, _ = run_functional(spheres, "kbuffer", {"k": 8})
+    work = Workload.of(result, spheres)
+    sms = sampled_sms(gpu)
+    assert sms == 2
+    reps = Replicates(work, gpu, sms / gpu.core.sms)
+    tiles = reps.tiles
+    assert tiles.shape[0] == gpu.sample.replicates
+    present = reps.info["tiles"]
+    assert (tiles.sum(axis=1) == round(present * sms / gpu.core.sms)).all()     # one tile per stratum
+    overlap = tiles.sum(axis=0)
+    deepest = reps.tile_of(reps.deepest)
+    assert overlap[deepest] == gpu.sample.replicates              # the deepest pixel's tile: in every replicate
+    assert (np.delete(overlap, deepest) <= 1).all()               # the others: in one replicate at most
+
+
+def test_a_sample_keeps_the_runs_load_on_each_shared_instance_and_word(spheres):
+    # the linked list's global node counter: the sample keeps 1/30 of its increments, each holding the word 30
+    # times as long, so its chain is the run's; each partition's load times its factor is the run's
+    gpu = load_gpu("gtx280")
+    result, _, _ = run_functional(spheres, "linked-list", {})
+    work = Workload.of(result, spheres)
+    small = scaled_gpu(gpu, 1)
+    reps = Replicates(work, gpu, 1 / 30)
+    pieces = plan_pieces(work)
+    program = lower(work, small, Keep(reps, 0), pieces=pieces)
+    whole = lower(work, gpu)
+    rows, every = program.rows_of("atomic"), whole.rows_of("atomic")
+    counter = np.bincount(np.unique(every.address, return_inverse=True)[1]).argmax()
+    word = np.unique(every.address)[counter]
+    hits = rows.address == word
+    assert hits.any() and program.hold_scale[hits].sum() == pytest.approx((every.address == word).sum())
+    # per pass and partition: the kept bytes times the factor are the run's bytes
+    from gpusim.hw.unit import interleave
+    mem = gpu.memory
+    loads = []
+    for prog in (program, whole):
+        rws, (_, _, wi_row) = prog.rows_of("coalescer"), prog.storage("coalescer")
+        load = np.zeros((len(prog.passes), mem.partitions))
+        np.add.at(load, (prog.wi_pass[wi_row], interleave(rws.address, mem.interleave_bytes, mem.partitions)),
+                  np.broadcast_to(rws.nbytes, rws.address.shape))
+        loads.append(load)
+    has = loads[0] > 0
+    assert has.sum() > 8 and np.allclose((loads[0] * program.occupancy["memory"])[has], loads[1][has])
+
+
+def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys):
+    from gpusim.cli import main
+    from gpusim.trace_io import save_trace
+    path = tmp_path / "s.npz"
+    save_trace(spheres, path)
+    assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled"]) == 0
+    text = capsys.readouterr().out
+    assert "95% CI" in text and "replicates of 1 SM each" in text
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("sample.replicates=1", "sample.replicates: must be >= 2"),
+    ("sample.fraction=0", "sample.fraction: must be > 0"),
+    ("sample.tile=0", "sample.tile: must be >= 1"),
+])
+def test_bad_sample_settings_fail_in_one_line(setting, message):
+    with pytest.raises(ConfigError) as info:
+        load_gpu("gtx280", [setting])
+    assert message in str(info.value) and "\n" not in str(info.value)
