@@ -61,7 +61,7 @@ def test_replicates_are_disjoint_stratified_samples(spheres):
     tiles = reps.tiles
     assert tiles.shape[0] == gpu.sample.replicates
     present = reps.info["tiles"]
-    assert (tiles.sum(axis=1) == round(present * sms / gpu.core.sms)).all()     # one tile per stratum
+    assert (tiles.sum(axis=1) == round(present * sms / gpu.core.sms)).all()       # one tile per stratum
     overlap = tiles.sum(axis=0)
     deepest = reps.tile_of(reps.deepest)
     assert overlap[deepest] == gpu.sample.replicates              # the deepest pixel's tile: in every replicate

@@ -65,7 +65,9 @@ class AtomicUnit(Unit):
         cost = fp_costs(nops[hit], config.ops_per_cycle)
         cell_wi, cell_part = div(hit, P), mod(hit, P)
         self.busy_fp = np.bincount(cell_part, weights=cost, minlength=P).astype(np.int64).tolist()
-        cost = occupancy(cost, prog.wi_pass[cell_wi], cell_part, prog, "atomic")   # a sampled program's: longer
+        if prog.occupancy is not None:         # a sampled program: as long as the run's operations there
+            cost = occupancy(cost, prog.wi_pass[cell_wi], cell_part, prog, "atomic")
+            self.run_busy_fp = np.bincount(cell_part, weights=cost, minlength=P).tolist()
         self.requests = np.bincount(cell_part, weights=nops[hit], minlength=P).astype(np.int64).tolist()
         # flat lists: instruction wi owns cells cells_of[wi]:cells_of[wi + 1]; cell j its lanes' address ids
         # lanes_of[j]:lanes_of[j + 1], grouped by cell (a stable sort: the lanes of one address, all in one

@@ -223,11 +223,19 @@ def _bits(n: int) -> int:
     return max(1, int(n).bit_length())
 
 
-def plan_pieces(work: Workload, passes: tuple[int, int] | None = None) -> list[_Piece]:
+class Pieces(list):
+    """:func:`plan_pieces`: a list of pieces, and what samples of the run share (``loads``: each piece's shared
+    unit instances and the whole run's load on them, once :func:`_occupancy` has counted them: samples of one
+    run on one GPU's memory and ROPs)."""
+
+    loads: dict | None = None
+
+
+def plan_pieces(work: Workload, passes: tuple[int, int] | None = None) -> Pieces:
     """The rows of each group in each pass (of ``passes``, numbered from its first), before lanes are known;
     :func:`lower` takes them (``pieces``) when it lowers several samples of one run."""
     p_first = passes[0] if passes is not None else 0
-    pieces = [pc for gi, g in enumerate(work.plan.groups) for pc in _group_pieces(gi, g, work.bases, passes)]
+    pieces = Pieces(pc for gi, g in enumerate(work.plan.groups) for pc in _group_pieces(gi, g, work.bases, passes))
     for pc in pieces:                  # pass numbers of this program
         pc.pass_index -= p_first
     return pieces
@@ -260,7 +268,8 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
     ws = gpu.core.warp_size
     n_pass = p_end - p_first
     modes = [thread_mapping(gpu, p) for p in plan.passes[p_first:p_end]]
-    pieces = list(pieces if pieces is not None else plan_pieces(work, passes))
+    shared = pieces if pieces is not None else plan_pieces(work, passes)
+    pieces = list(shared)
     totals = np.zeros(n_pass, np.int64)
     for pc in pieces:
         totals[pc.pass_index] += pc.operations
@@ -271,7 +280,7 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
                 masks[j] = m
         words = _word_ops([pc for pc in pieces if pc.instructions is None
                            and entry_unit(plan.groups[pc.group].op) == "atomic"])
-        occupancy = _occupancy(pieces, masks, plan, gpu, n_pass)
+        occupancy = _occupancy(shared, masks, plan, gpu, n_pass)
         for j, (pc, m) in enumerate(zip(pieces, masks)):
             if not m.all():
                 pieces[j] = pc.take(np.flatnonzero(m))
@@ -283,7 +292,8 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
             by_pass[pc.pass_index].append(pc)
 
     # the units the program issues to, in plan order (those of the groups with operations here)
-    units = tuple(dict.fromkeys(entry_unit(plan.groups[pc.group].op) for pc in pieces if pc.instructions is None))
+    units = tuple(dict.fromkeys(entry_unit(plan.groups[pc.group].op) for pc in pieces
+                                if pc.instructions is None and len(pc.thread)))
     passes, inst = [], []
     rows: dict[str, list] = {}         # unit -> row arrays of its pieces
     atomic_pass: list[int] = []        # the pass of each of the atomic unit's row arrays
@@ -449,26 +459,37 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
                    occupancy=occupancy, hold_scale=_hold_scale(words, rows.get("atomic", []), atomic_pass))
 
 
-def _occupancy(pieces: list[_Piece], masks: list[np.ndarray], plan: OpPlan, gpu, n_pass: int) -> dict | None:
+def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pass: int) -> dict | None:
     """A sample's ``Program.occupancy``: per shared unit, (passes, instances) factors, the whole run's load on
     each instance in each pass (bytes on the memory partitions, operations on the atomic units and ROPs) over
-    the kept threads' (1 where they put none); None when every factor is 1."""
+    the kept threads' (1 where they put none); None when every factor is 1. The run's loads are counted once
+    per ``pieces`` (``Pieces.loads``)."""
     mem = gpu.memory
     instances = {"coalescer": ("memory", mem.partitions), "atomic": ("atomic", mem.partitions),
                  "rop": ("rop", gpu.rop.units)}
-    loads: dict[str, tuple] = {}
-    for pc, m in zip(pieces, masks):
-        unit = None if pc.instructions is not None else instances.get(entry_unit(plan.groups[pc.group].op))
-        if unit is None:
-            continue
-        name, n = unit
-        key = pc.pass_index * n + interleave(pc.address, mem.interleave_bytes, n)
-        weight = np.broadcast_to(np.asarray(pc.nbytes, np.float64) if name == "memory" else 1.0, key.shape)
-        every, kept = loads.setdefault(name, (np.zeros(n_pass * n), np.zeros(n_pass * n), n))[:2]
-        every += np.bincount(key, weights=weight, minlength=n_pass * n)
-        kept += np.bincount(key[m], weights=weight[m], minlength=n_pass * n)
-    out = {name: np.where(kept > 0, every / np.maximum(kept, 1e-9), 1.0).reshape(n_pass, n)
-           for name, (every, kept, n) in loads.items()}
+    cache = pieces.loads if isinstance(pieces, Pieces) and pieces.loads is not None else None
+    if cache is None:                   # each piece's (unit, n, instance key, weight), and the run's loads
+        cache = {"keys": [], "every": {}}
+        for pc in pieces:
+            unit = None if pc.instructions is not None else instances.get(entry_unit(plan.groups[pc.group].op))
+            if unit is None:
+                cache["keys"].append(None)
+                continue
+            name, n = unit
+            key = pc.pass_index * n + interleave(pc.address, mem.interleave_bytes, n)
+            weight = np.broadcast_to(np.asarray(pc.nbytes, np.float64) if name == "memory" else 1.0, key.shape)
+            cache["keys"].append((name, n, key, weight))
+            cache["every"][name] = cache["every"].get(name, 0) + np.bincount(key, weights=weight,
+                                                                             minlength=n_pass * n)
+        if isinstance(pieces, Pieces):
+            pieces.loads = cache
+    every, kept = cache["every"], {}
+    for entry, m in zip(cache["keys"], masks):
+        if entry is not None:
+            name, n, key, weight = entry
+            kept[name] = kept.get(name, 0) + np.bincount(key[m], weights=weight[m], minlength=n_pass * n)
+    out = {name: np.where(k > 0, every[name] / np.maximum(k, 1e-9), 1.0).reshape(n_pass, -1)
+           for name, k in kept.items()}
     return {k: v for k, v in out.items() if not (v == 1).all()} or None
 
 

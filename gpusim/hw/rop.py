@@ -89,6 +89,8 @@ class RopUnit(Unit):
         # instruction's hold its unit after them, before the next instruction's
         held = occupancy(service, self.row_pass, unit, prog, "rop")
         self.others = None if held is service else (held - service).tolist()
+        if self.others is not None:
+            self.run_busy_fp = np.bincount(unit, weights=held, minlength=config.units).tolist()
         self.row_wi = wi_row.tolist() if self.others is not None else None
         self.after, self.last = [0] * config.units, [-1] * config.units
         self.produces = prog.wi_produces.tolist()

@@ -113,9 +113,9 @@ def scaled_gpu(gpu, sms: int):
 def _stratified(weight: np.ndarray, present: np.ndarray, share: float, replicates: int,
                 rng: np.random.Generator, certain: int) -> np.ndarray:
     """``(replicates, units)`` masks: the present units ranked by ``weight`` (ties at random) and cut into
-    ``round(share x units)`` strata of equal count; replicate ``r`` takes the stratum's ``r``-th unit in a random
-    order (cycling when the stratum has fewer), except that every replicate takes unit ``certain`` in its
-    stratum (-1: none)."""
+    ``round(share x units)`` strata of equal count (at least one); replicate ``r`` takes the stratum's ``r``-th
+    unit in a random order (cycling when the stratum has fewer), except that every replicate takes unit
+    ``certain`` (-1: none) in its stratum."""
     units = np.flatnonzero(present)
     n = len(units)
     out = np.zeros((replicates, len(present)), bool)
@@ -129,8 +129,7 @@ def _stratified(weight: np.ndarray, present: np.ndarray, share: float, replicate
     first = np.searchsorted(stratum, np.arange(k))
     size = np.diff(np.append(first, n))
     for r in range(replicates):
-        pick = first + r % size
-        out[r, ranked[np.where(ranked[first] == certain, first, pick)]] = True
+        out[r, ranked[np.where(ranked[first] == certain, first, first + r % size)]] = True
     return out
 
 
@@ -157,6 +156,8 @@ class Replicates:
                                                  minlength=blocks), np.ones(blocks, bool), share, self.count, rng,
                                      int(per_triangle.argmax()) // ws if len(prims) else -1)
         self.lanes: dict[int, tuple] = {}        # pass -> its lanes and the replicates' choice of their warps
+        self.frag_tile = self.tile_of(pixel)
+        self.units: dict[int, list] = {}         # pass -> the sampling unit of each thread of each group
         self.info = {"tiles": int((frag_tiles > 0).sum()), "tiles_per_replicate": int(self.tiles[0].sum()),
                      "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
 
@@ -164,11 +165,24 @@ class Replicates:
         tile = self.gpu.sample.tile
         return (pixel // self.work.width // tile) * self.tiles_x + (pixel % self.work.width) // tile
 
+    def units_of(self, p: int, threads: list[np.ndarray], mapping: str) -> list[np.ndarray]:
+        """The sampling unit of each thread of each group of pass ``p`` (the same for every replicate)."""
+        if p not in self.units:
+            ws = self.gpu.core.warp_size
+            if mapping == "triangle":
+                self.units[p] = [self.work.frag_prim[t] // ws for t in threads]
+            elif mapping == "fragment":
+                self.units[p] = [self.frag_tile[t] for t in threads]
+            else:
+                lanes = self.warps(p, threads)[0]
+                self.units[p] = [np.searchsorted(lanes, t) // ws for t in threads]
+        return self.units[p]
+
     def warps(self, p: int, threads: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """A pass whose threads fill warps in order: its lanes (sorted) and the replicates' choice of its warps,
         stratified by their fragments (pixel threads) or their position (others)."""
         if p not in self.lanes:
-            lanes = np.unique(np.concatenate(threads))
+            lanes = _distinct(np.concatenate(threads))
             ws = self.gpu.core.warp_size
             n = -(-len(lanes) // ws)
             pixels = self.work.plan.passes[p].threads == "pixel"
@@ -191,15 +205,10 @@ class Keep:
 
     def __call__(self, p: int, threads: list[np.ndarray]) -> list[np.ndarray]:
         reps, r = self.reps, self.r
-        ws = reps.gpu.core.warp_size
         mapping = thread_mapping(reps.gpu, reps.work.plan.passes[p])
-        if mapping == "triangle":
-            units, chosen = [reps.work.frag_prim[t] // ws for t in threads], reps.triangles[r]
-        elif mapping == "fragment":
-            units, chosen = [reps.tile_of(reps.work.frag_pixel[t]) for t in threads], reps.tiles[r]
-        else:
-            lanes, warps = reps.warps(p, threads)
-            units, chosen = [np.searchsorted(lanes, t) // ws for t in threads], warps[r]
+        units = reps.units_of(p, threads, mapping)
+        chosen = (reps.triangles if mapping == "triangle" else reps.tiles if mapping == "fragment"
+                  else reps.lanes[p][1])[r]
         masks = [chosen[u] for u in units]
         if not any(m.any() for m in masks):       # none kept: one of the pass's units, picked at random
             every = np.concatenate(units)
@@ -213,6 +222,19 @@ class Keep:
         return self.reps.triangles[self.r][ids // self.reps.gpu.core.warp_size]
 
 
+def _distinct(values: np.ndarray) -> np.ndarray:
+    """The distinct values of a non-negative integer array, ascending (a mask over their range when it is
+    small, as thread ids are: far faster than hashing)."""
+    if not len(values):
+        return values
+    lo, hi = int(values.min()), int(values.max())
+    if hi - lo > 8 * len(values):
+        return np.unique(values)
+    seen = np.zeros(hi - lo + 1, bool)
+    seen[values - lo] = True
+    return np.flatnonzero(seen) + lo
+
+
 def rmw_threads(source, work: Workload) -> tuple[int, int]:
     """Fragment threads with an ``rmw_read``, and their pixels: of an OpPlan, or of a lowered (sampled)
     Program."""
@@ -222,8 +244,8 @@ def rmw_threads(source, work: Workload) -> tuple[int, int]:
     else:
         parts = [g.thread_ids() for g in source.groups if g.op == "rmw_read"]
         threads = np.concatenate(parts) if parts else np.zeros(0, np.int64)
-    threads = np.unique(threads)
-    return len(threads), len(np.unique(work.frag_pixel[threads])) if len(threads) else 0
+    threads = _distinct(threads)
+    return len(threads), len(_distinct(work.frag_pixel[threads])) if len(threads) else 0
 
 
 def _replicate(work: Workload, small, program: Program, rmw_all: tuple[int, int]) -> dict:
@@ -240,6 +262,8 @@ def _replicate(work: Workload, small, program: Program, rmw_all: tuple[int, int]
     for name, u in rec["units"].items():
         scale = 1.0 if name == "raster" else 1 / w    # the front end takes every triangle
         out["units"][name] = {k: v * scale if k in ADDITIVE else v for k, v in u.items()}
+        if "run_busy_cycles" in u:                    # a shared unit: the run's busy cycles, from its load
+            out["units"][name]["busy_cycles"] = out["units"][name].pop("run_busy_cycles")
     rmw_kept = rmw_threads(program, work)
     for key, every, mine in zip(("rmw_hazards", "rmw_hazard_pixels"), rmw_all, rmw_kept):
         out[key] = min(every, rec.get(key, 0) * every / mine) if mine else 0

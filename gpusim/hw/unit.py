@@ -195,13 +195,21 @@ class Unit:
         return {"busy_cycles": busy, "requests": list(self.requests),
                 "utilisation": [b / total_cycles if total_cycles else 0.0 for b in busy]}
 
+    #: a sampled program (``Program.occupancy``): per instance, the sub-cycles its requests hold it, the other
+    #: requests that came with them included (the run's busy cycles, estimated); None for a whole run
+    run_busy_fp: list | None = None
+
     def summary(self, total_cycles: int) -> dict:
-        """The unit over all its instances (``replay --json``'s ``timing.units``)."""
+        """The unit over all its instances (``replay --json``'s ``timing.units``); a sampled program's shared
+        unit adds ``run_busy_cycles`` (:attr:`run_busy_fp`)."""
         busy = [b / FP for b in self.busy_fp]
         util = [b / total_cycles if total_cycles else 0.0 for b in busy]
-        return {"instances": self.instances, "requests": int(sum(self.requests)),
-                "busy_cycles": float(sum(busy)), "utilisation_mean": float(sum(util) / len(util)),
-                "utilisation_max": float(max(util))}
+        out = {"instances": self.instances, "requests": int(sum(self.requests)),
+               "busy_cycles": float(sum(busy)), "utilisation_mean": float(sum(util) / len(util)),
+               "utilisation_max": float(max(util))}
+        if self.run_busy_fp is not None:
+            out["run_busy_cycles"] = float(sum(self.run_busy_fp)) / FP
+        return out
 
     def line_trace(self) -> str:
         """One line of the unit's state for debugging (PyMTL style): the cycle each of its first instances is

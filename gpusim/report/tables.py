@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from gpusim.experiment.store import FIGURE_COLUMNS, LEAD_COLUMNS
+from gpusim.experiment.store import FIGURE_COLUMNS, LEAD_COLUMNS, LEVEL_COLUMNS
 
 #: fidelity levels from the most to the least faithful; figures use the first one present
 LEVEL_ORDER = ("full", "sampled", "analytic", "thesis")
@@ -22,7 +22,7 @@ APPROXIMATE_LEVELS = ("analytic", "sampled")
 
 def axis_columns(results: pd.DataFrame) -> tuple[list[str], list[str], list[str]]:
     """(scheme parameter columns, gpu-set columns, scene-set columns) of a results table."""
-    fixed = set(LEAD_COLUMNS) | set(FIGURE_COLUMNS)
+    fixed = set(LEAD_COLUMNS) | set(FIGURE_COLUMNS) | set(LEVEL_COLUMNS)
     rest = [c for c in results if c not in fixed and not c.startswith("stat.")]
     scene_set = [c for c in rest if c.startswith("scene.")]
     params = [c for c in rest if c not in scene_set and ("." not in c or c.startswith("param."))]
@@ -88,9 +88,25 @@ def pareto(points: pd.DataFrame, x: str, y: str) -> pd.DataFrame:
     return ordered.loc[keep]
 
 
+#: issue 20's targets for the approximate levels against ``full``, over a corpus: (level, measure, bound,
+#: direction); speed-ups count the cases of at least FAST_CASE_FRAGMENTS fragments only
+FIDELITY_TARGETS = (("sampled", "median |cycle error|", 0.02, "<="), ("sampled", "max |cycle error|", 0.05, "<="),
+                    ("sampled", "median speed-up over full", 10.0, ">="),
+                    ("sampled", "full cycles inside the 95% interval", 0.95, ">="),
+                    ("analytic", "max |cycle error|", 0.10, "<="),
+                    ("analytic", "median speed-up over full", 50.0, ">="))
+FAST_CASE_FRAGMENTS = 1_000_000
+#: the largest |cycle error| a case may have to meet its level's error target (the max targets above)
+CASE_ERROR_BOUND = {"sampled": 0.05, "analytic": 0.10}
+ERROR_COLUMNS = ["run", "setting", "config", "scheme", "fidelity", "fragments", "cycles", "full_cycles",
+                 "cycle_error", "wall_seconds", "full_wall_seconds", "speedup", "ci_low", "ci_high", "error_estimate",
+                 "inside", "hazards", "full_hazards", "full_run"]
+
+
 def fidelity_errors(labelled: pd.DataFrame) -> pd.DataFrame:
     """One row per finished analytic or sampled run that has a finished ``full`` run of the same setting
-    and configuration: its cycles, the full level's, the relative cycle error, and both wall times.
+    and configuration: its cycles, the full level's, the relative cycle error, both wall times, and for a
+    sampled run its 95% interval and whether the full level's cycles lie inside it; both runs' hazards.
     ``labelled`` is the results table with :func:`with_labels`' columns."""
     ok = labelled[labelled["status"] == "ok"]
     full = ok[ok["fidelity"] == "full"].set_index(["setting", "config"])
@@ -104,14 +120,17 @@ def fidelity_errors(labelled: pd.DataFrame) -> pd.DataFrame:
             ref = ref.iloc[0]
         if not ref["cycles"] > 0:
             continue
-        rows.append({"setting": row["setting"], "config": row["config"], "scheme": row["scheme"],
-                     "fidelity": row["fidelity"], "cycles": row["cycles"], "full_cycles": ref["cycles"],
-                     "cycle_error": row["cycles"] / ref["cycles"] - 1.0,
+        low, high = (row.get(c, math.nan) for c in ("cycles_ci95_low", "cycles_ci95_high"))
+        rows.append({"run": row["run"], "setting": row["setting"], "config": row["config"], "scheme": row["scheme"],
+                     "fidelity": row["fidelity"], "fragments": row["fragments"], "cycles": row["cycles"],
+                     "full_cycles": ref["cycles"], "cycle_error": row["cycles"] / ref["cycles"] - 1.0,
                      "wall_seconds": row["wall_seconds_timing"], "full_wall_seconds": ref["wall_seconds_timing"],
                      "speedup": ref["wall_seconds_timing"] / row["wall_seconds_timing"]
-                     if row["wall_seconds_timing"] > 0 else math.nan})
-    return pd.DataFrame(rows, columns=["setting", "config", "scheme", "fidelity", "cycles", "full_cycles",
-                                       "cycle_error", "wall_seconds", "full_wall_seconds", "speedup"])
+                     if row["wall_seconds_timing"] > 0 else math.nan,
+                     "ci_low": low, "ci_high": high, "error_estimate": row.get("cycle_error_estimate", math.nan),
+                     "inside": (low <= ref["cycles"] <= high) if not pd.isna(low) else math.nan,
+                     "hazards": row["hazards"], "full_hazards": ref["hazards"], "full_run": ref["run"]})
+    return pd.DataFrame(rows, columns=ERROR_COLUMNS)
 
 
 def fidelity_summary(errors: pd.DataFrame) -> pd.DataFrame:
@@ -122,6 +141,125 @@ def fidelity_summary(errors: pd.DataFrame) -> pd.DataFrame:
         rows.append({"fidelity": level, "runs": len(rows_), "median_abs_error": float(err.median()),
                      "max_abs_error": float(err.max()), "median_speedup": float(rows_["speedup"].median())})
     return pd.DataFrame(rows, columns=["fidelity", "runs", "median_abs_error", "max_abs_error", "median_speedup"])
+
+
+def error_percentiles(errors: pd.DataFrame, column: str, by: list[str]) -> pd.DataFrame:
+    """Per group of ``by``: the runs with a finite ``column`` (a relative error) and the median, 90th
+    percentile and largest of its absolute value."""
+    rows = []
+    finite = errors[np.isfinite(errors[column].astype(float))]
+    for key, part in finite.groupby(by, sort=False):
+        err = part[column].abs().astype(float)
+        rows.append(dict(zip(by, key if isinstance(key, tuple) else (key,)))
+                    | {"runs": len(part), "median": float(err.median()), "p90": float(err.quantile(0.9)),
+                       "max": float(err.max())})
+    return pd.DataFrame(rows, columns=[*by, "runs", "median", "p90", "max"])
+
+
+def fast_cases(errors: pd.DataFrame) -> pd.DataFrame:
+    """The compared runs of at least :data:`FAST_CASE_FRAGMENTS` fragments: the speed figures' cases."""
+    return errors[errors["fragments"] >= FAST_CASE_FRAGMENTS]
+
+
+def fidelity_targets(errors: pd.DataFrame) -> pd.DataFrame:
+    """Each of :data:`FIDELITY_TARGETS` on ``errors``: the measured value (NaN where no run counts: no such
+    level, or for a speed-up no case of :data:`FAST_CASE_FRAGMENTS` fragments), the cases that count, and
+    whether it is met; plus per level the share of cases within its :data:`CASE_ERROR_BOUND`."""
+    rows = []
+    for level, measure, bound, direction in FIDELITY_TARGETS:
+        part = errors[errors["fidelity"] == level]
+        if "speed-up" in measure:
+            part = fast_cases(part)
+            value = part["speedup"].median() if len(part) else math.nan
+        elif "inside" in measure:
+            part = part[part["inside"].notna()]
+            value = part["inside"].astype(float).mean() if len(part) else math.nan
+        else:
+            err = part["cycle_error"].abs()
+            value = (err.median() if measure.startswith("median") else err.max()) if len(part) else math.nan
+        met = (value <= bound if direction == "<=" else value >= bound) if not math.isnan(value) else None
+        rows.append({"level": level, "target": f"{measure} {direction} {_bound(measure, bound)}",
+                     "cases": len(part), "measured": value, "met": _met(met)})
+    for level, bound in CASE_ERROR_BOUND.items():
+        part = errors[errors["fidelity"] == level]
+        share = float((part["cycle_error"].abs() <= bound).mean()) if len(part) else math.nan
+        rows.append({"level": level, "target": f"cases with |cycle error| <= {bound:.0%}: >= 90%",
+                     "cases": len(part), "measured": share, "met": _met(share >= 0.9 if len(part) else None)})
+    return pd.DataFrame(rows, columns=["level", "target", "cases", "measured", "met"])
+
+
+def _bound(measure: str, bound: float) -> str:
+    return f"{bound:g}x" if "speed-up" in measure else f"{bound:.0%}"
+
+
+def _met(met: bool | None) -> str:
+    return "no cases" if met is None else "met" if met else "missed"
+
+
+def decided_by(stats: pd.DataFrame) -> dict[str, str]:
+    """Per run with pass cycles labelled by their bound (the analytic level): the bounds that decided it, with
+    their share of its cycles, largest first (``latency 92%, dram 8%``)."""
+    sel = stats[(stats["unit"] == "machine") & (stats["stat"] == "pass_cycles")
+                & stats["labels"].str.contains("bound=", regex=False)]
+    if sel.empty:
+        return {}
+    bound = sel["labels"].str.extract(r"bound=([^,]+)")[0]
+    shares = sel.assign(bound=bound).groupby(["run", "bound"], sort=False)["value"].sum()
+    out = {}
+    for run, part in shares.groupby(level=0, sort=False):
+        part = part.droplevel(0).sort_values(ascending=False)
+        total = part.sum()
+        out[run] = ", ".join(f"{b} {v / total:.0%}" for b, v in part.items() if v >= 0.05 * total) if total \
+            else "empty passes"
+    return out
+
+
+def sample_sizes(stats: pd.DataFrame) -> dict[str, str]:
+    """Per sampled run: its sample (replicates of how many SMs, tiles per replicate of how many)."""
+    sel = stats[stats["unit"] == "sample"]
+    out = {}
+    for run, part in sel.groupby("run", sort=False):
+        v = dict(zip(part["stat"], part["value"]))
+        out[run] = (f"{v.get('replicates', 0):.0f} x {v.get('sms', 0):.0f} SM ({v.get('share', 0):.1%} of the "
+                    f"GPU), {v.get('tiles_per_replicate', 0):,.0f} of {v.get('tiles', 0):,.0f} tiles each")
+    return out
+
+
+def fidelity_misses(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFrame:
+    """The cases that miss their level's error target (|cycle error| over :data:`CASE_ERROR_BOUND`) or, for a
+    sampled run, whose 95% interval leaves out the full level's cycles; with what decided the case: the
+    analytic level's bounds, the sampled level's sample and its own error estimate."""
+    bounds, samples = decided_by(stats), sample_sizes(stats)
+    rows = []
+    for _, e in errors.iterrows():
+        over = abs(e["cycle_error"]) > CASE_ERROR_BOUND.get(e["fidelity"], math.inf)
+        outside = e["inside"] is False or e["inside"] == 0
+        if not (over or outside):
+            continue
+        why = (bounds.get(e["run"], "-") if e["fidelity"] == "analytic"
+               else f"{samples.get(e['run'], '-')}; error estimate {fmt(e['error_estimate'], 'share')}")
+        rows.append({"fidelity": e["fidelity"], "setting": e["setting"], "config": e["config"],
+                     "cycle_error": e["cycle_error"],
+                     "missed": " and ".join(m for m, hit in (("error", over), ("interval", outside)) if hit),
+                     "decided by": why})
+    return pd.DataFrame(rows, columns=["fidelity", "setting", "config", "cycle_error", "missed", "decided by"])
+
+
+def busy_errors(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFrame:
+    """Per compared run and hardware unit class: the level's busy cycles (summed over the unit's instances)
+    against the full run's, as a relative error; units the full run keeps busy only."""
+    busy = stats[stats["stat"] == "busy_cycles"]
+    busy = busy.assign(name=busy["unit"].str.split(".").str[-1]).groupby(["run", "name"], sort=False)["value"].sum()
+    rows = []
+    for _, e in errors.iterrows():
+        if e["full_run"] not in busy.index.get_level_values(0):
+            continue
+        for unit, full in busy.loc[e["full_run"]].items():
+            mine = busy.get((e["run"], unit), math.nan)
+            if full > 0:
+                rows.append({"fidelity": e["fidelity"], "scheme": e["scheme"], "unit": unit,
+                             "busy_error": mine / full - 1.0})
+    return pd.DataFrame(rows, columns=["fidelity", "scheme", "unit", "busy_error"])
 
 
 def one_per_functional(labelled: pd.DataFrame) -> pd.DataFrame:

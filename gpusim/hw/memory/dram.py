@@ -91,6 +91,8 @@ class DramChannel(MemoryLevel):
         free = self.free
         start = free[partition] if free[partition] > at_fp else at_fp
         free[partition] = start + held_fp
+        if self.run_busy_fp is not None:
+            self.run_busy_fp[partition] += held_fp
         self.busy_fp[partition] += cost_fp
         self.requests[partition] += 1
         return -(-(start + cost_fp) // FP) + self.latency

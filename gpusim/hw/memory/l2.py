@@ -78,7 +78,7 @@ class L2Slice(MemoryLevel):
         bounds = np.append(run_starts(wi), len(wi)).tolist()
         cost, miss, evict = (fp_costs(nbytes, self.rate), self.next.request_costs(nbytes),
                              self.next.request_costs(nbytes + self.line))
-        held = [self.occupy(c, wi, part) for c in (cost, miss, evict)]
+        held = [self.occupy(c, wi, part, c is cost) for c in (cost, miss, evict)]
         reqs = list(zip(part.tolist(), div(address, self.line).tolist(), cost.tolist(), miss.tolist(),
                         evict.tolist(), *(h.tolist() for h in held)))
         first = wi[bounds[:-1]].tolist()

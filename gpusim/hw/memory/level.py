@@ -77,13 +77,20 @@ class MemoryLevel(Unit):
         self.next: MemoryLevel | None = machine.level_after(self.name)
         self.free = [0] * self.instances      # sub-cycle each instance is free
         self.program = getattr(machine, "program", None)
+        if self.program is not None and self.program.occupancy is not None:
+            self.run_busy_fp = [0] * self.instances
 
-    def occupy(self, cost_fp: np.ndarray, wi: np.ndarray, partition: np.ndarray) -> np.ndarray:
+    def occupy(self, cost_fp: np.ndarray, wi: np.ndarray, partition: np.ndarray, mine: bool = True) -> np.ndarray:
         """How long requests of ``cost_fp`` from instructions ``wi`` hold ``partition`` (gpusim.hw.unit.occupancy:
-        their cost, in a sampled program the run's share of the partition's traffic)."""
+        their cost, in a sampled program the run's share of the partition's traffic); ``mine``: requests this
+        level serves (counted in :attr:`run_busy_fp`), not the next level's."""
         if self.program is None or self.program.occupancy is None:
             return cost_fp
-        return occupancy(cost_fp, self.program.wi_pass[wi], partition, self.program, "memory")
+        held = occupancy(cost_fp, self.program.wi_pass[wi], partition, self.program, "memory")
+        if mine:
+            self.run_busy_fp = (np.asarray(self.run_busy_fp) + np.bincount(partition, weights=held,
+                                                                             minlength=self.instances)).tolist()
+        return held
 
     @classmethod
     def needed(cls, program, gpu) -> bool:

@@ -1,0 +1,157 @@
+"""The fidelity report's tables (gpusim.report.tables) on a small hand-made results table, and the fidelity
+experiment (configs/experiments/fidelity.toml) with its committed report."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from gpusim.report.tables import (busy_errors, decided_by, error_percentiles, fidelity_errors, fidelity_misses,
+                                  fidelity_targets, with_labels)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _results() -> pd.DataFrame:
+    """Two scenes (one of 2M fragments) x two schemes x full, sampled and analytic on one GPU."""
+    rows = []
+    cases = {  # (scene, scheme): full cycles, sampled cycles, its interval, analytic cycles, fragments
+        ("big", "kbuffer"): (1000, 1010, (990, 1030), 1200, 2_000_000),
+        ("big", "zbuffer"): (500, 540, (520, 560), 480, 2_000_000),
+        ("small", "kbuffer"): (100, 99, (95, 105), 104, 1000),
+        ("small", "zbuffer"): (50, 50, (50, 50), 50, 1000),
+    }
+    walls = {"full": 10.0, "sampled": 0.5, "analytic": 0.1}
+    for (scene, scheme), (full, sampled, (low, high), analytic, fragments) in cases.items():
+        for level, cycles in (("full", full), ("sampled", sampled), ("analytic", analytic)):
+            rows.append({"run": f"{scene}-{scheme}-{level}", "status": "ok", "error": "", "index": len(rows),
+                         "scene": scene, "width": 8, "height": 8, "trace": "", "gpu": "gtx280", "fidelity": level,
+                         "scheme": scheme, "variant": scheme, "cycles": cycles, "fragments": fragments,
+                         "wall_seconds_timing": walls[level] * (2 if scene == "big" else 1),
+                         "hazards": (40 if level == "full" else 30) if scheme == "kbuffer" else math.nan,
+                         "cycles_ci95_low": low if level == "sampled" else math.nan,
+                         "cycles_ci95_high": high if level == "sampled" else math.nan,
+                         "cycle_error_estimate": 0.01 if level == "sampled" else math.nan})
+    return pd.DataFrame(rows)
+
+
+def _stats() -> pd.DataFrame:
+    rows = []
+    for scene in ("big", "small"):
+        for scheme in ("kbuffer", "zbuffer"):
+            run = f"{scene}-{scheme}"
+            # the full level: busy cycles per instance; the others: per unit class
+            rows += [(f"{run}-full", "memory.dram", "busy_cycles", f"instance={i}", 100.0) for i in range(2)]
+            rows += [(f"{run}-sampled", "dram", "busy_cycles", "", 210.0), (f"{run}-analytic", "dram", "busy_cycles",
+                                                                            "", 180.0)]
+            rows += [(f"{run}-analytic", "machine", "pass_cycles", "pass=a,index=0,kind=geometry,bound=latency", 900),
+                     (f"{run}-analytic", "machine", "pass_cycles", "pass=b,index=1,kind=fullscreen,bound=dram", 100)]
+            rows += [(f"{run}-sampled", "sample", key, "", value)
+                     for key, value in (("replicates", 4), ("sms", 1), ("share", 1 / 30), ("tiles", 64),
+                                        ("tiles_per_replicate", 2))]
+    return pd.DataFrame(rows, columns=["run", "unit", "stat", "labels", "value"])
+
+
+@pytest.fixture
+def errors():
+    return fidelity_errors(with_labels(_results()))
+
+
+def test_errors_hold_each_approximate_run_against_full(errors):
+    assert len(errors) == 8
+    row = errors.set_index("run").loc["big-zbuffer-sampled"]
+    assert row["setting"] == "big gtx280" and row["config"] == "zbuffer" and row["full_run"] == "big-zbuffer-full"
+    assert row["cycle_error"] == pytest.approx(0.08) and row["speedup"] == pytest.approx(20.0)
+    assert not row["inside"]                                   # 500 outside [520, 560]
+    inside = errors[errors["fidelity"] == "sampled"].set_index("run")["inside"].astype(bool).to_dict()
+    assert inside == {"big-kbuffer-sampled": True, "big-zbuffer-sampled": False, "small-kbuffer-sampled": True,
+                      "small-zbuffer-sampled": True}
+    assert errors[errors["fidelity"] == "analytic"]["inside"].isna().all()
+
+
+def test_percentiles_per_level_and_scheme(errors):
+    table = error_percentiles(errors, "cycle_error", ["fidelity"]).set_index("fidelity")
+    sampled = sorted([0.01, 0.08, 0.01, 0.0])
+    assert table.loc["sampled", "median"] == pytest.approx(pd.Series(sampled).median())
+    assert table.loc["sampled", "p90"] == pytest.approx(pd.Series(sampled).quantile(0.9))
+    assert table.loc["sampled", "max"] == pytest.approx(0.08) and table.loc["analytic", "max"] == pytest.approx(0.2)
+    per = error_percentiles(errors, "cycle_error", ["fidelity", "scheme"])
+    assert per[(per["fidelity"] == "analytic") & (per["scheme"] == "kbuffer")]["max"].item() == pytest.approx(0.2)
+
+
+def test_targets_count_speed_on_large_cases_only(errors):
+    t = fidelity_targets(errors).set_index(["level", "target"])
+    assert t.loc[("sampled", "median |cycle error| <= 2%"), "measured"] == pytest.approx(0.01)
+    assert t.loc[("sampled", "median |cycle error| <= 2%"), "met"] == "met"
+    assert t.loc[("sampled", "max |cycle error| <= 5%"), "met"] == "missed"          # 8%
+    assert t.loc[("analytic", "max |cycle error| <= 10%"), "met"] == "missed"        # 20%
+    speed = t.loc[("sampled", "median speed-up over full >= 10x")]
+    assert speed["cases"] == 2 and speed["measured"] == pytest.approx(20.0) and speed["met"] == "met"
+    assert t.loc[("analytic", "median speed-up over full >= 50x"), "measured"] == pytest.approx(100.0)
+    assert t.loc[("sampled", "full cycles inside the 95% interval >= 95%"), "measured"] == pytest.approx(0.75)
+    assert t.loc[("sampled", "full cycles inside the 95% interval >= 95%"), "met"] == "missed"
+    assert t.loc[("sampled", "cases with |cycle error| <= 5%: >= 90%"), "measured"] == pytest.approx(0.75)
+    small = fidelity_targets(errors[errors["fragments"] < 1_000_000]).set_index(["level", "target"])
+    assert small.loc[("sampled", "median speed-up over full >= 10x"), "met"] == "no cases"
+
+
+def test_misses_say_what_decided_them(errors):
+    stats = _stats()
+    assert decided_by(stats)["big-kbuffer-analytic"] == "latency 90%, dram 10%"
+    misses = fidelity_misses(errors, stats).set_index(["fidelity", "setting", "config"])
+    assert set(misses.index) == {("analytic", "big gtx280", "kbuffer"), ("sampled", "big gtx280", "zbuffer")}
+    assert misses.loc[("analytic", "big gtx280", "kbuffer"), "decided by"] == "latency 90%, dram 10%"
+    sampled = misses.loc[("sampled", "big gtx280", "zbuffer")]
+    assert sampled["missed"] == "error and interval" and "4 x 1 SM" in sampled["decided by"]
+
+
+def test_busy_errors_sum_the_full_levels_instances(errors):
+    busy = busy_errors(errors, _stats())
+    assert set(busy["unit"]) == {"dram"} and len(busy) == 8
+    assert busy[busy["fidelity"] == "sampled"]["busy_error"].tolist() == pytest.approx([0.05] * 4)
+    assert busy[busy["fidelity"] == "analytic"]["busy_error"].tolist() == pytest.approx([-0.1] * 4)
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory) -> Path:
+    """The fidelity corpus at its CI size (every scheme, two small scenes, gtx280 and modern, three levels)."""
+    from gpusim.experiment import load_experiment
+    from gpusim.experiment.runner import run_experiment
+    out = tmp_path_factory.mktemp("fidelity-ci")
+    summary = run_experiment(load_experiment("fidelity-ci"), out, workers=1, quiet=True)
+    assert summary.failed == 0 and summary.ok == summary.runs
+    return out
+
+
+def test_the_corpus_covers_every_scheme_gpu_and_scene():
+    from gpusim.experiment import load_experiment
+    from gpusim.schemes import scheme_names
+    exp = load_experiment("fidelity")
+    assert {e.scheme for e in exp.schemes} == set(scheme_names())
+    assert set(exp.gpus) >= {"gtx280", "geforce7900gtx", "modern"} and exp.fidelity == ["full", "sampled", "analytic"]
+    assert {s.name for s in exp.scene_sweeps} >= {"default", "bunny", "foliage", "nested-spheres", "thesis-frame120",
+                                                  "stress-layers", "coplanar"}
+
+
+def test_the_ci_corpus_reports_each_sampled_runs_interval(corpus):
+    from gpusim.report.experiment import _Report
+    results = pd.read_parquet(corpus / "results.parquet")
+    sampled = results[results["fidelity"] == "sampled"]
+    assert len(sampled) and (sampled["cycles_ci95_low"] <= sampled["cycles"]).all()
+    assert (sampled["cycles"] <= sampled["cycles_ci95_high"]).all() and (sampled["cycle_error_estimate"] >= 0).all()
+    assert results.loc[results["fidelity"] != "sampled", "cycles_ci95_low"].isna().all()
+    report = _Report(corpus, corpus)
+    report.figdir.mkdir(parents=True, exist_ok=True)
+    report.error_against_time()
+    text = "\n".join(report.lines)
+    for heading in ("#### Targets", "#### Cycle error per level and scheme",
+                    "#### The sampled level's 95% confidence interval", "#### RMW hazards and busy cycles per unit",
+                    "#### Cases that miss"):
+        assert heading in text, heading
+    assert "no case here has that many fragments, so the speed targets are not measured" in text
+    errors = fidelity_errors(with_labels(report.results))
+    inside = int(errors["inside"].dropna().astype(bool).sum())
+    assert f"inside the sampled run's 95% interval in {inside} of {len(sampled)} cases" in text
