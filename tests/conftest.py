@@ -1,4 +1,4 @@
-"""Shared fixtures: small traces built in memory."""
+"""Shared fixtures: small traces built in memory, and a bundled experiment run into a folder."""
 
 from __future__ import annotations
 
@@ -29,3 +29,12 @@ def random_trace():
     return make_trace(rng.integers(0, 16, n), rng.integers(0, 12, n), rng.random(n),
                       rng.random((n, 4)), rng.random(n) < 0.1, width=16, height=12,
                       meta={"background": [0.2, 0.3, 0.4]})
+
+
+def ran_experiment(name: str, out):
+    """Bundled experiment ``name`` run into ``out`` in this process, every run finished: ``out``."""
+    from gpusim.experiment import load_experiment
+    from gpusim.experiment.runner import run_experiment
+    summary = run_experiment(load_experiment(name), out, workers=1, quiet=True)
+    assert summary.failed == 0 and summary.ok == summary.runs
+    return out

@@ -84,16 +84,16 @@ def test_percentiles_per_level_and_scheme(errors):
 
 def test_targets_count_speed_on_large_cases_only(errors):
     t = fidelity_targets(errors).set_index(["level", "target"])
-    assert t.loc[("sampled", "median |cycle error| <= 2%"), "measured"] == pytest.approx(0.01)
-    assert t.loc[("sampled", "median |cycle error| <= 2%"), "met"] == "met"
-    assert t.loc[("sampled", "max |cycle error| <= 5%"), "met"] == "missed"          # 8%
-    assert t.loc[("analytic", "max |cycle error| <= 10%"), "met"] == "missed"        # 20%
+    assert t.loc[("sampled", "median abs. cycle error <= 2%"), "measured"] == pytest.approx(0.01)
+    assert t.loc[("sampled", "median abs. cycle error <= 2%"), "met"] == "met"
+    assert t.loc[("sampled", "max abs. cycle error <= 5%"), "met"] == "missed"          # 8%
+    assert t.loc[("analytic", "max abs. cycle error <= 10%"), "met"] == "missed"        # 20%
     speed = t.loc[("sampled", "median speed-up over full >= 10x")]
     assert speed["cases"] == 2 and speed["measured"] == pytest.approx(20.0) and speed["met"] == "met"
     assert t.loc[("analytic", "median speed-up over full >= 50x"), "measured"] == pytest.approx(100.0)
     assert t.loc[("sampled", "full cycles inside the 95% interval >= 95%"), "measured"] == pytest.approx(0.75)
     assert t.loc[("sampled", "full cycles inside the 95% interval >= 95%"), "met"] == "missed"
-    assert t.loc[("sampled", "cases with |cycle error| <= 5%: >= 90%"), "measured"] == pytest.approx(0.75)
+    assert t.loc[("sampled", "cases with abs. cycle error <= 5%: >= 90%"), "measured"] == pytest.approx(0.75)
     small = fidelity_targets(errors[errors["fragments"] < 1_000_000]).set_index(["level", "target"])
     assert small.loc[("sampled", "median speed-up over full >= 10x"), "met"] == "no cases"
 
@@ -118,12 +118,8 @@ def test_busy_errors_sum_the_full_levels_instances(errors):
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory) -> Path:
     """The fidelity corpus at its CI size (every scheme, two small scenes, gtx280 and modern, three levels)."""
-    from gpusim.experiment import load_experiment
-    from gpusim.experiment.runner import run_experiment
-    out = tmp_path_factory.mktemp("fidelity-ci")
-    summary = run_experiment(load_experiment("fidelity-ci"), out, workers=1, quiet=True)
-    assert summary.failed == 0 and summary.ok == summary.runs
-    return out
+    from conftest import ran_experiment
+    return ran_experiment("fidelity-ci", tmp_path_factory.mktemp("fidelity-ci"))
 
 
 def test_the_corpus_covers_every_scheme_gpu_and_scene():
@@ -155,3 +151,26 @@ def test_the_ci_corpus_reports_each_sampled_runs_interval(corpus):
     errors = fidelity_errors(with_labels(report.results))
     inside = int(errors["inside"].dropna().astype(bool).sum())
     assert f"inside the sampled run's 95% interval in {inside} of {len(sampled)} cases" in text
+
+
+def test_committed_fidelity_report_matches_the_experiment():
+    """reports/fidelity/ is fidelity-report.toml's run (fidelity.toml's grid at the committed size)."""
+    import tomllib
+
+    from gpusim.experiment import load_experiment
+    from gpusim.experiment.grid import expand
+    from gpusim.report.figures import MAX_PNG_BYTES
+    report = ROOT / "reports" / "fidelity"
+    text = (report / "index.md").read_text()
+    for heading in ("### The simulator's own fidelity: cycle error against wall time", "#### Targets",
+                    "#### The sampled level's 95% confidence interval", "#### Cases that miss"):
+        assert heading in text, heading
+    for png in (report / "figures").glob("*.png"):
+        assert png.stat().st_size <= MAX_PNG_BYTES, png
+    t = pd.read_parquet(report / "results.parquet")
+    assert len(t) == len(expand(load_experiment("fidelity"))) == len(expand(load_experiment("fidelity-report"))), \
+        "reports/fidelity is not the experiment's: run `gpusim run fidelity-report` and commit reports/fidelity"
+    assert (t["status"] == "ok").all(), t.loc[t["status"] != "ok", "error"].iloc[0]
+    resolved = tomllib.loads((report / "resolved.toml").read_text())
+    assert [s["set"] for s in resolved["scene-sweeps"]] == \
+        [s["set"] for s in load_experiment("fidelity-report").resolved_data()["scene-sweeps"]]

@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gpusim.errors import ConfigError
 from gpusim.hw import load_gpu
 from gpusim.hw.lower import Workload, lower, plan_pieces
 from gpusim.hw.sample import Keep, Replicates, sampled_sms, scaled_gpu, t_quantile
@@ -106,14 +105,3 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled"]) == 0
     text = capsys.readouterr().out
     assert "95% CI" in text and "replicates of 1 SM each" in text
-
-
-@pytest.mark.parametrize("setting, message", [
-    ("sample.replicates=1", "sample.replicates: must be >= 2"),
-    ("sample.fraction=0", "sample.fraction: must be > 0"),
-    ("sample.tile=0", "sample.tile: must be >= 1"),
-])
-def test_bad_sample_settings_fail_in_one_line(setting, message):
-    with pytest.raises(ConfigError) as info:
-        load_gpu("gtx280", [setting])
-    assert message in str(info.value) and "\n" not in str(info.value)

@@ -165,6 +165,8 @@ def test_impossible_gpu_config_fails_at_load(key, value, match):
     ("core.warp_size=33", "--gpu-set core.warp_size=33: core.warp_size: must be a power of two from 1 to 1024"),
     ("core.smss=4", "--gpu-set core.smss=4: core.smss: unknown key (valid: sms, warp_size, lanes_per_sm"),
     ("sample.fraction=0", "--gpu-set sample.fraction=0: sample.fraction: must be > 0, got 0.0"),
+    ("sample.replicates=1", "--gpu-set sample.replicates=1: sample.replicates: must be >= 2"),
+    ("sample.tile=0", "--gpu-set sample.tile=0: sample.tile: must be >= 1"),
     ("scoreboard.entries=8", "--gpu-set scoreboard.entries=8: scoreboard.entries (8) must be >= core.warp_size"),
 ])
 def test_a_bad_override_names_the_override_not_the_preset(override, message):

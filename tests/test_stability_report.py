@@ -15,7 +15,6 @@ import pytest
 from gpusim.errors import ConfigError
 from gpusim.experiment import load_experiment
 from gpusim.experiment.grid import expand
-from gpusim.experiment.runner import run_experiment
 from gpusim.report.experiment import _Report
 from gpusim.report.figures import MAX_PNG_BYTES
 from gpusim.report.tables import fmt, most_faithful
@@ -27,10 +26,8 @@ SWEEPS = {"depth-complexity": "objects.0.layers", "alpha": "objects.0.alpha", "d
 
 @pytest.fixture(scope="module")
 def sweep(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("stability-ci")
-    summary = run_experiment(load_experiment("stability-ci"), out, workers=1, quiet=True)
-    assert summary.failed == 0 and summary.ok == summary.runs
-    return out
+    from conftest import ran_experiment
+    return ran_experiment("stability-ci", tmp_path_factory.mktemp("stability-ci"))
 
 
 def _section(root: Path, out: Path) -> str:

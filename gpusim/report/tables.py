@@ -90,10 +90,10 @@ def pareto(points: pd.DataFrame, x: str, y: str) -> pd.DataFrame:
 
 #: issue 20's targets for the approximate levels against ``full``, over a corpus: (level, measure, bound,
 #: direction); speed-ups count the cases of at least FAST_CASE_FRAGMENTS fragments only
-FIDELITY_TARGETS = (("sampled", "median |cycle error|", 0.02, "<="), ("sampled", "max |cycle error|", 0.05, "<="),
+FIDELITY_TARGETS = (("sampled", "median abs. cycle error", 0.02, "<="), ("sampled", "max abs. cycle error", 0.05, "<="),
                     ("sampled", "median speed-up over full", 10.0, ">="),
                     ("sampled", "full cycles inside the 95% interval", 0.95, ">="),
-                    ("analytic", "max |cycle error|", 0.10, "<="),
+                    ("analytic", "max abs. cycle error", 0.10, "<="),
                     ("analytic", "median speed-up over full", 50.0, ">="))
 FAST_CASE_FRAGMENTS = 1_000_000
 #: the largest |cycle error| a case may have to meet its level's error target (the max targets above)
@@ -183,7 +183,7 @@ def fidelity_targets(errors: pd.DataFrame) -> pd.DataFrame:
     for level, bound in CASE_ERROR_BOUND.items():
         part = errors[errors["fidelity"] == level]
         share = float((part["cycle_error"].abs() <= bound).mean()) if len(part) else math.nan
-        rows.append({"level": level, "target": f"cases with |cycle error| <= {bound:.0%}: >= 90%",
+        rows.append({"level": level, "target": f"cases with abs. cycle error <= {bound:.0%}: >= 90%",
                      "cases": len(part), "measured": share, "met": _met(share >= 0.9 if len(part) else None)})
     return pd.DataFrame(rows, columns=["level", "target", "cases", "measured", "met"])
 
