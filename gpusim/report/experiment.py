@@ -253,11 +253,12 @@ class _Report:
                                                                               "speedup": "x"}), "", "</details>", "")
 
     def fidelity_detail(self, errors: pd.DataFrame) -> None:
-        """Issue 20's targets on the compared runs, error percentiles per level and scheme (cycles, hazards,
-        busy cycles per unit), the sampled level's interval coverage, and the cases that miss."""
+        """The approximate levels' accuracy and speed targets on the compared runs, error percentiles per level
+        and scheme (cycles, hazards, busy cycles per unit), the sampled level's interval coverage, and the cases
+        that miss."""
         share = {"median": "share", "p90": "share", "max": "share"}
         fast = fast_cases(errors)
-        self.add("#### Targets", "", "The targets of issue 20 on this experiment's cases. A cycle error is a "
+        self.add("#### Targets", "", "gpusim's targets for its approximate levels, on this experiment's cases. A cycle error is a "
                  "level's against the full level on the same scene, GPU and scheme configuration; a speed-up is "
                  "the full level's wall time over the level's, and the speed targets count the cases of at least "
                  f"{FAST_CASE_FRAGMENTS:,} fragments only: "

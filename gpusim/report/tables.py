@@ -88,7 +88,7 @@ def pareto(points: pd.DataFrame, x: str, y: str) -> pd.DataFrame:
     return ordered.loc[keep]
 
 
-#: issue 20's targets for the approximate levels against ``full``, over a corpus: (level, measure, bound,
+#: the targets of the approximate levels against ``full``, over a corpus: (level, measure, bound,
 #: direction); speed-ups count the cases of at least FAST_CASE_FRAGMENTS fragments only
 FIDELITY_TARGETS = (("sampled", "median abs. cycle error", 0.02, "<="), ("sampled", "max abs. cycle error", 0.05, "<="),
                     ("sampled", "median speed-up over full", 10.0, ">="),
