@@ -231,6 +231,11 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
                 outcomes.append(Outcome(run.run_id, "failed", one_line(exc),
                                         figures | {"wall_seconds_timing": time.perf_counter() - start}))
                 continue
+            finally:
+                # the event model's processes, events and units refer to each other: reference cycles that
+                # hold the run's arrays (a failed run's too) until a full collection, which Python seldom
+                # makes; without this a sweep in one process (or one worker) grows by a run's memory per run
+                gc.collect()
             rec["timing"] = timing
             if gpu_config is not None:
                 rec["gpu_config"] = gpu_config
@@ -238,10 +243,5 @@ def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
             stats += timing_stat_rows(timing)
             if timed is not None:
                 images["image-timed"] = rgb8(timed)
-            del timed
-            # the event model's processes, events and units refer to each other: reference cycles that hold
-            # the run's arrays until a full collection, which Python seldom makes; without this a sweep in
-            # one process (or one worker) grows by a run's memory per run until it is killed
-            gc.collect()
         outcomes.append(Outcome(run.run_id, "ok", "", figures, stats, rec, images))
     return outcomes
