@@ -239,6 +239,23 @@ def test_stats_table_is_long_form_and_agrees_with_the_row(small_run):
     assert mine[mine["unit"] == "memory.dram"]["labels"].str.startswith("instance=").all()
 
 
+def test_submitted_triangles_stat_is_what_the_timing_model_charges():
+    """A trace whose metadata does not count its triangles (a CSV import) reports the highest primitive id + 1,
+    as the front end and the k-buffer's batches count them; a trace that says reports its own count."""
+    import numpy as np
+    from gpusim.experiment.execute import trace_stat_rows
+    from gpusim.trace import FragmentTrace
+    n = 5
+    fields = dict(x=np.arange(n, dtype=np.uint16), y=np.zeros(n, np.uint16), z=np.full(n, 0.5, np.float32),
+                  rgba=np.full((n, 4), 0.5, np.float32), prim=np.array([0, 0, 3, 7, 7], np.uint32),
+                  opaque=np.zeros(n, bool))
+    bare = FragmentTrace(width=8, height=1, **fields)
+    (row,) = trace_stat_rows(bare)
+    assert (row["stat"], row["value"], row["value_unit"]) == ("primitives_submitted", 8, "triangles")
+    said = FragmentTrace(width=8, height=1, meta={"primitives": 12}, **fields)
+    assert trace_stat_rows(said)[0]["value"] == 12
+
+
 def test_each_run_has_its_files(small_run):
     _, out = small_run
     t = table(out)

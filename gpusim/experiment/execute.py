@@ -24,6 +24,7 @@ import numpy as np
 
 from gpusim.errors import GpusimError
 from gpusim.hw.gpu import GpuConfig
+from gpusim.schemes.common.reorder import submitted_primitives
 
 
 @dataclass(frozen=True)
@@ -163,11 +164,11 @@ def functional_stat_rows(record: dict) -> list[dict]:
 
 
 def trace_stat_rows(trace) -> list[dict]:
-    """The trace's own counts in long form (unit ``trace``): the triangles its scene submitted (from its metadata;
-    none for a trace that does not say, such as a CSV import)."""
-    row = _stat("trace", "primitives_submitted", trace.meta.get("primitives"), "triangles",
-                "triangles the scene sent to the rasterizer (after any subdivision)")
-    return [row] if row is not None else []
+    """The trace's own counts in long form (unit ``trace``): the triangles its scene submitted, as the timing
+    model charges them (:func:`~gpusim.schemes.common.reorder.submitted_primitives`: the trace's metadata, or the
+    highest primitive id + 1 for a trace that does not say, such as a CSV import)."""
+    return [_stat("trace", "primitives_submitted", submitted_primitives(trace), "triangles",
+                  "triangles the scene sent to the rasterizer (after any subdivision)")]
 
 
 def timing_stat_rows(timing: dict) -> list[dict]:
