@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from gpusim.schemes.common.arrays import lex_order, lex_sorted, reversed_runs, sort_within_runs
+from gpusim.schemes.common.arrays import lex_order, lex_sorted, put_rows, reversed_runs, sort_within_runs, take_rows
 from gpusim.schemes.common.sections import SectionIndex
 
 _DTYPES = [np.bool_, np.uint8, np.int8, np.uint16, np.int32, np.uint32, np.int64, np.uint64]
@@ -88,3 +88,17 @@ def test_sort_within_runs_sorts_each_run_where_it_stands():
     ascending = np.sort(pix)
     np.testing.assert_array_equal(sort_within_runs(ascending, key), lex_order(ascending, key))
     assert len(sort_within_runs(np.zeros(0, np.int64), np.zeros(0, np.uint32))) == 0
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 5), st.data())
+def test_take_and_put_rows_match_fancy_indexing(n, width, data):
+    src = data.draw(hnp.arrays(np.float32, (n, width), elements=st.floats(-1e6, 1e6, width=32)))
+    rows = np.asarray(data.draw(st.lists(st.integers(0, n - 1), max_size=3 * n)), np.int64)
+    assert np.array_equal(take_rows(src, rows), src[rows])
+    assert np.array_equal(take_rows(src[:, ::-1], rows), src[:, ::-1][rows])      # not contiguous: plain indexing
+    unique = np.unique(rows)
+    a, b = src.copy(), src.copy()
+    put_rows(a, unique, src[unique][::-1])
+    b[unique] = src[unique][::-1]
+    assert np.array_equal(a, b)

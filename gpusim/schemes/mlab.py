@@ -39,8 +39,8 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, MLAB_FRAGMENT, MLAB_MERGE, compare_exchange
-from gpusim.schemes.common.arrays import entry_index
-from gpusim.schemes.common.fold import fold
+from gpusim.metrics.composite import runs_by_length
+from gpusim.schemes.common.arrays import entry_index, lex_order, put_rows, rank_in_runs, take_rows
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, rounder
 from gpusim.schemes.result import SchemeResult, Stat, Structure
@@ -56,11 +56,14 @@ def insert_and_merge(keys: np.ndarray, values: np.ndarray, key: np.ndarray, valu
     (keys, values) and whether each pixel merged."""
     m, L = keys.shape
     pos = (keys <= key[:, None]).sum(axis=1)                      # entries at or in front of the fragment
-    slot = np.arange(L + 1)[None, :]
-    src = np.where(slot < pos[:, None], slot, slot - 1)           # which old entry lands in each slot
-    rows = np.arange(m)[:, None]
-    ext_k = np.where(slot == pos[:, None], key[:, None], keys[rows, np.clip(src, 0, L - 1)])
-    ext_v = np.where((slot == pos[:, None])[..., None], value[:, None, :], values[rows, np.clip(src, 0, L - 1)])
+    ext_k = np.empty((m, L + 1), keys.dtype)
+    ext_v = np.empty((m, L + 1, 4), values.dtype)
+    for j in range(L + 1):       # slot j: old entry j in front of the fragment, the fragment, old entry j - 1 behind
+        behind_k, behind_v = (keys[:, j - 1], values[:, j - 1]) if j else (key, value)
+        here_k, here_v = np.where(pos == j, key, behind_k), np.where((pos == j)[:, None], value, behind_v)
+        if j < L:
+            here_k, here_v = np.where(pos > j, keys[:, j], here_k), np.where((pos > j)[:, None], values[:, j], here_v)
+        ext_k[:, j], ext_v[:, j] = here_k, here_v
     merged = ext_k[:, L] != EMPTY
     near, far = ext_v[:, L - 1], ext_v[:, L]
     mix = np.empty_like(near)
@@ -99,7 +102,7 @@ class MultiLayerAlphaBlending(Scheme):
         rnd = rounder(self.colour_format)
         kept = g.alpha > 0                          # alpha 0: the shader discards it
         frags = np.flatnonzero(kept)
-        count = np.bincount(pix[frags], minlength=P)
+        count = g.count if len(frags) == n else np.bincount(pix[frags], minlength=P)
         occupied = np.minimum(count, L)
 
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment"),
@@ -119,31 +122,40 @@ class MultiLayerAlphaBlending(Scheme):
         plan.add(2, "load", "layers", pixels, L, lambda i, s: entry_index(i, s, L, P, "layer-major") * entry, entry)
         plan.compute(2, pixels, occupied * COMPOSITE)
 
-        a = g.alpha[frags]
-        value = np.empty((len(frags), 4), np.float32)
-        value[:, :3] = rnd(trace.rgba[frags, :3] * a[:, None])
+        arrival = g.by_arrival                              # kept fragments in arrival order
+        arrival = arrival if len(frags) == n else arrival[kept[arrival]]
+        a = g.alpha[arrival]
+        value = np.empty((len(arrival), 4), np.float32)     # in arrival order, as ``ikey`` and ``key``
+        value[:, :3] = rnd(take_rows(trace.rgba, arrival)[:, :3] * a[:, None])
         value[:, 3] = rnd(np.float32(1.0) - a)
-        key = g.key[frags].astype(np.float64)
-        order = np.flatnonzero(kept[g.by_arrival])          # positions of kept fragments in arrival order
-        arrival = g.by_arrival[order]
-        at_frag = np.empty(n, np.int64)
-        at_frag[frags] = np.arange(len(frags))
-        value, key = value[at_frag[arrival]], key[at_frag[arrival]]   # in arrival order
-        state = np.zeros((P, L, 6), np.float64)             # key, rgb, T, merged
-        state[:, :, 0] = EMPTY
-        state[:, :, 4] = 1.0
-
-        def step(s, i):
-            k, v, merged = insert_and_merge(s[:, :, 0], s[:, :, 1:5].astype(np.float32), key[i], value[i], rnd)
-            out = np.empty_like(s)
-            out[:, :, 0], out[:, :, 1:5] = k, v
-            out[:, :, 5] = s[:, :, 5] + merged[:, None]
-            return out
-
-        state = fold(pix, arrival, state, step)
+        ikey = g.key[arrival]
+        key = ikey.astype(np.float64)
+        keys = np.full((P, L), EMPTY)
+        vals = np.zeros((P, L, 4), np.float32)
+        vals[:, :, 3] = 1.0
+        merges = np.zeros(P, np.int64)
+        if len(arrival):
+            pix_sorted = pix[arrival]
+            # a pixel's first L fragments fill its entries without a merge: their insertions leave them in depth
+            # order, equal depths in arrival order (a stable sort), so they are placed at once
+            first = np.flatnonzero(rank_in_runs(pix_sorted) < L)
+            first = first[lex_order(pix_sorted[first], ikey[first])]
+            at = pix_sorted[first] * L + rank_in_runs(pix_sorted[first])     # (pixel, slot) of a pixel's entries
+            keys.reshape(-1)[at] = key[first]
+            put_rows(vals.reshape(P * L, 4), at, take_rows(value, first))
+            # every later fragment is one insertion and merge, in arrival order (rank by rank over the pixels)
+            start, _, active = runs_by_length(pix_sorted)
+            covered = pix_sorted[start]
+            flat = vals.reshape(P, L * 4)
+            for j in range(L, len(active)):
+                rows, i = covered[:active[j]], start[:active[j]] + j
+                k, v, merged = insert_and_merge(take_rows(keys, rows), take_rows(flat, rows).reshape(-1, L, 4),
+                                                key[i], take_rows(value, i), rnd)
+                put_rows(keys, rows, k)
+                put_rows(flat, rows, v.reshape(-1, L * 4))
+                merges[rows] += merged
         # the resolve's output saturates to [0, 1] (rounded premultiplied colours and transmittances can sum past 1)
-        image = np.clip(resolve_layers(state[:, :, 1:5].astype(np.float32), trace.background), 0.0, 1.0)
-        merges = state[:, 0, 5].astype(np.int64)
+        image = np.clip(resolve_layers(vals, trace.background), 0.0, 1.0)
         struct = [Structure("layers", entry, P * L, int(occupied.sum()), f"{L} layers of 32-bit depth + "
                             f"{self.colour_format} premultiplied colour and transmittance")]
         stats = {"merges": Stat(int(merges.sum()), "fragments", "insertions that merged the two farthest entries"),

@@ -132,6 +132,15 @@ def put_rows(dst: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
     dst.view(item).reshape(-1)[rows] = src.view(item).reshape(-1)
 
 
+def take_rows(src: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``src[rows]`` for a C-contiguous 2-D ``src``: each row gathered as one opaque item (numpy's row-wise
+    fancy indexing is several times slower on a random order)."""
+    if not src.flags.c_contiguous or src.ndim != 2:
+        return src[rows]
+    item = np.dtype((np.void, src.dtype.itemsize * src.shape[1]))
+    return src.view(item).reshape(-1)[rows].view(src.dtype).reshape(len(rows), src.shape[1])
+
+
 def rank_in_runs(pix_sorted: np.ndarray) -> np.ndarray:
     """0-based position of each element inside its run of a grouped array."""
     start = run_starts(pix_sorted)
