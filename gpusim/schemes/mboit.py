@@ -50,10 +50,11 @@ from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.blending import OpaqueMode, composite_over, opaque_prepass, prepass_structures
 from gpusim.schemes.common.alu import MBOIT_GENERATE, MBOIT_RESOLVE, PREMULTIPLY, mboit_reconstruct
-from gpusim.schemes.common.fold import fold
+from gpusim.metrics.composite import run_starts
 from gpusim.schemes.common.groups import PixelGroups
-from gpusim.schemes.common.moments import CONFIGS, absorbance, moment_terms, transmittance, warp_depth
-from gpusim.schemes.common.storage import COLOUR_BYTES, rounder
+from gpusim.schemes.common.arrays import lex_order, put_rows
+from gpusim.schemes.common.moments import CONFIGS, absorbance, factor, moment_terms, transmittance_rows, warp_depth
+from gpusim.schemes.common.storage import COLOUR_BYTES, effective_alpha, rounder
 from gpusim.schemes.result import SchemeResult, Stat, Structure
 
 #: per precision: (bytes, render-target format) of b_0 and of each higher moment
@@ -67,6 +68,58 @@ BIAS = {"half": 5e-3, "half-all": 5e-3, "single": 5e-6}
 def target_channels(reals: int) -> list[int]:
     """Channels of each render target holding ``reals`` moment values (RGBA targets, the last RG or R)."""
     return [min(4, reals - at) for at in range(0, reals, 4)]
+
+
+class RankMajor:
+    """The fragments of grouped runs (pixels) in rank-major order: every pixel's first fragment, then every
+    second fragment, ... . Pixels are numbered longest run first (``pixel``: their ids), so the pixels with a
+    fragment of rank j are a prefix 0 .. m_j - 1 and rank j's fragments are one contiguous block whose row i
+    belongs to pixel i: a per-pixel fold in arrival order (ROP blending) adds block to prefix, no gathers."""
+
+    def __init__(self, pix_sorted: np.ndarray):
+        n = len(pix_sorted)
+        start = run_starts(pix_sorted)
+        length = np.diff(np.r_[start, n])
+        if n:
+            by_length = lex_order(length.max() - length)
+            start, length = start[by_length], length[by_length]
+        self.pixel = pix_sorted[start]
+        self.pixels = len(start)
+        #: pixels with a fragment of rank j (non-increasing)
+        self.active = np.searchsorted(-length, -(np.arange(length[0] if n else 0) + 1), side="right")
+        self.position = np.empty(n, np.int64)         # rank-major position -> position in ``pix_sorted``
+        for at, j, m in self._blocks():
+            self.position[at:at + m] = start[:m] + j
+
+    def _blocks(self):
+        at = 0
+        for j, m in enumerate(self.active.tolist()):
+            yield at, j, m
+            at += m
+
+    def blocks(self):
+        """(first rank-major position, pixels) of each rank's block."""
+        return [(at, m) for at, _, m in self._blocks()]
+
+    def fold(self, rows: np.ndarray, values: np.ndarray, step) -> np.ndarray:
+        """``rows`` (pixels, ...) updated by ``rows[:m] = step(rows[:m], block)`` for each rank's block of
+        ``values`` (rank-major)."""
+        for at, m in self.blocks():
+            rows[:m] = step(rows[:m], values[at:at + m])
+        return rows
+
+    def scatter(self, rows: np.ndarray, pixel_count: int) -> np.ndarray:
+        """(pixel_count, ...) zeros with each pixel's row."""
+        out = np.zeros((pixel_count,) + rows.shape[1:], rows.dtype)
+        put_rows(out, self.pixel, rows)
+        return out
+
+
+def _scatter_rows(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Rows of ``values`` at the True places of ``mask``, zeros elsewhere."""
+    out = np.zeros((len(mask),) + values.shape[1:], values.dtype)
+    out[mask] = values
+    return out
 
 
 @register("mboit")
@@ -120,34 +173,57 @@ class MomentBasedOIT(Scheme):
         # normalise and weigh by 1 - exp(-b_0); over the background here, or by the framebuffer's blend
         composite_over(plan, p1 + 2, pixels, MBOIT_RESOLVE, prepass)
 
-        order = g.by_arrival[blended[g.by_arrival]]
-        zw = warp_depth(trace.z)
-        terms = np.take(moment_terms(zw, absorbance(g.alpha), ms), order, axis=0)   # in arrival order
+        keep = blended[g.by_arrival]
+        order = g.by_arrival[keep]                      # the blended fragments by pixel, in arrival order
+        ranks = RankMajor(g.pix_by_arrival[keep])
+        frag = order[ranks.position]                    # rank-major: every pixel's first fragment, then second...
+        zw = warp_depth(trace.z[frag])
+        rgba = np.take(trace.rgba, frag, axis=0)
+        alpha = effective_alpha(rgba, trace.opaque[frag])
         zeroth_round, value_round, acc_round = rounder(zfmt), rounder(vfmt), rounder(self.accum_format)
 
-        def add_moments(s, i):
-            out = s + np.take(terms, i, axis=0)
-            out[:, 0] = zeroth_round(out[:, 0])
-            out[:, 1:] = value_round(out[:, 1:])
+        def add_moments(s, terms):
+            out = s + terms
+            if zfmt != "r32f":
+                out[:, 0] = zeroth_round(out[:, 0])
+            if vfmt != "r32f":
+                out[:, 1:] = value_round(out[:, 1:])
             return out
 
-        state = fold(pix, order, np.zeros((P, 1 + ms.reals), np.float32), add_moments)
-        T = np.ones(n, np.float32)
-        T[frags], invalid = transmittance(state[:, 0], state[:, 1:], pix[frags], zw[frags], ms, bias,
-                                          self.overestimation)
-        weight = T * g.alpha
-        out = np.empty((n, 4), np.float32)
-        out[:, :3] = trace.rgba[:, :3] * weight[:, None]
+        rows = ranks.fold(np.zeros((ranks.pixels, 1 + ms.reals), np.float32),
+                          moment_terms(zw, absorbance(alpha), ms), add_moments)
+        b0 = rows[:, 0]
+        lit = b0 > 0                                    # b_0 = 0: nothing in front, T = 1
+        all_lit = bool(lit.all())
+        L, D = factor(b0 if all_lit else b0[lit], rows[:, 1:] if all_lit else rows[lit, 1:], ms, bias)
+        if not all_lit:
+            L, D = _scatter_rows(L, lit), _scatter_rows(D, lit)
+        T = np.empty(len(frag), np.float32)
+        invalid = 0
+        for at, m in ranks.blocks():
+            t, bad = transmittance_rows(L[:m], D[:m], b0[:m], zw[at:at + m], ms, self.overestimation)
+            if not all_lit:
+                t[~lit[:m]], bad[~lit[:m]] = 1, False
+            T[at:at + m] = t
+            invalid += int(np.count_nonzero(bad))
+        weight = T * alpha
+        out = np.empty((len(frag), 4), np.float32)
+        out[:, :3] = rgba[:, :3] * weight[:, None]
         out[:, 3] = weight
-        out = np.take(out, order, axis=0)
-        acc = fold(pix, order, np.zeros((P, 4), np.float32), lambda s, i: acc_round(s + np.take(out, i, axis=0)))
+        acc_rows = ranks.fold(np.zeros((ranks.pixels, 4), np.float32), out, lambda s, o: acc_round(s + o))
+        state = ranks.scatter(rows, P)
+        acc = ranks.scatter(acc_rows, P)
 
         with np.errstate(all="ignore"):
             total = np.exp(-state[:, 0]).astype(np.float32)
             colour = acc[:, :3] / np.maximum(acc[:, 3:4], np.float32(np.finfo(np.float32).tiny))
             image = colour * (np.float32(1.0) - total[:, None]) + base * total[:, None]
-        overflow = int(np.count_nonzero(~np.isfinite(state).all(axis=1) | ~np.isfinite(acc).all(axis=1)))
-        touched = np.bincount(pix[frags], minlength=P) > 0
+        finite = np.ones(ranks.pixels, bool)         # pixels without fragments keep finite zeros
+        for column in (*rows.T, *acc_rows.T):
+            finite &= np.isfinite(column)
+        overflow = int(np.count_nonzero(~finite))
+        touched = np.zeros(P, bool)
+        touched[ranks.pixel] = True
         zero_weight = int(np.count_nonzero(touched & (acc[:, 3] == 0) & (total < 1)))
         # the displayed (unorm) value of an overflowed target: +inf saturates to 1, NaN reads as 0
         image = np.clip(np.nan_to_num(image, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
@@ -161,7 +237,7 @@ class MomentBasedOIT(Scheme):
             struct[:0] = prepass_structures(trace, pix)
         stats = {
             "moment_bits": Stat(8 * (zb + vb * ms.reals), "bits/pixel", "bits of b_0 and the moments per pixel"),
-            "invalid_reconstructions": Stat(int(np.count_nonzero(invalid)), "fragments",
+            "invalid_reconstructions": Stat(invalid, "fragments",
                                             "fragments whose reconstruction gave a NaN (T = 0, as saturate)"),
             "accumulation_overflow": Stat(overflow, "pixels", "pixels whose moment or accumulation sums overflowed"),
             "zero_weight_pixels": Stat(zero_weight, "pixels", "pixels whose fragments' weights T a all summed to 0 "

@@ -283,9 +283,57 @@ def _parameter(x: np.ndarray) -> np.ndarray:
     return np.where(angle < 0, angle + F32(2 * np.pi), angle).astype(F32)
 
 
+def _power_share(L: np.ndarray, D: np.ndarray, zw: np.ndarray, ms: MomentSet, overestimation: float) -> np.ndarray:
+    """:func:`_absorbance_share` of power moments, the same float32 operations in the same order on one
+    contiguous column per matrix entry (no (n, k) temporaries, no row sums): u(x)_0 = 1, so the first step
+    of each forward substitution (u_i - L_i0 * 1) and the first Christoffel term (1 * 1 / D_0) drop a
+    multiplication by 1, which is exact."""
+    k = L.shape[1]
+    with np.errstate(all="ignore"):
+        low = {(i, m): np.ascontiguousarray(L[:, i, m]) for i in range(1, k) for m in range(i)}
+        d = [np.ascontiguousarray(D[:, j]) for j in range(k)]
+        first = F32(1.0) / d[0]
+
+        def forward(x):
+            y, u = [None], x
+            for i in range(1, k):
+                if i > 1:
+                    u = u * x
+                yi = u - low[i, 0]
+                for m in range(1, i):
+                    yi = yi - low[i, m] * y[m]
+                y.append(yi)
+            return y
+
+        def christoffel(x):
+            y = forward(x)
+            s = first
+            for j in range(1, k):
+                s = s + y[j] * y[j] / d[j]
+            return F32(1.0) / s
+
+        y = forward(zw)
+        c = [first] + [y[i] / d[i] for i in range(1, k)]
+        for i in range(k - 2, -1, -1):
+            for m in range(i + 1, k):
+                c[i] = c[i] - low[m, i] * c[m]
+        coef = np.stack(c, axis=1)
+        roots = quadratic_roots(coef) if ms.size == 3 else cubic_roots(coef)
+        share = F32(overestimation) * christoffel(zw)
+        for x in roots:
+            # a root at infinity weighs 0; a NaN root stays NaN (a shader's comparison with NaN is false, its
+            # sum is NaN)
+            w = np.where(np.isinf(x), F32(0.0), christoffel(x))
+            front = (x < zw).astype(F32)
+            share = share + np.where(np.isnan(x), np.nan, np.where(front > 0, w * front, F32(0.0))).astype(F32)
+    return share.astype(F32)
+
+
 def _absorbance_share(L: np.ndarray, D: np.ndarray, zw: np.ndarray, ms: MomentSet,
                       overestimation: float) -> np.ndarray:
     """Normalised absorbance in front of each fragment from its pixel's factored moment matrix (L, D)."""
+    if ms.kind == "power":
+        return _power_share(L, D, zw, ms, overestimation)
     with np.errstate(all="ignore"):
         if ms.kind == "power":
             x0, front_of = zw, zw
@@ -326,6 +374,30 @@ def normalised(b0: np.ndarray, moments: np.ndarray, ms: MomentSet, bias: float) 
     return out
 
 
+def factor(b0: np.ndarray, moments: np.ndarray, ms: MomentSet, bias: float) -> tuple[np.ndarray, np.ndarray]:
+    """(L, D): the L D L^H factorisation of each pixel's biased normalised moment matrix, from its sums ``b0``
+    (p,) and ``moments`` (p, reals) as read from storage (the same float32 operations each fragment's shader
+    repeats; a pixel whose b_0 is 0 gives non-finite factors)."""
+    return _ldl(_matrix(normalised(b0, moments, ms, bias), ms))
+
+
+def transmittance_rows(L: np.ndarray, D: np.ndarray, b0: np.ndarray, zw: np.ndarray, ms: MomentSet,
+                       overestimation: float) -> tuple[np.ndarray, np.ndarray]:
+    """(T, invalid) of fragments at warped depths ``zw`` (n,) whose pixels' factors and b_0 are the rows
+    ``L`` (n, k, k), ``D`` (n, k) and ``b0`` (n,) (T = saturate(exp(-b_0 share)), a NaN giving T = 0)."""
+    T = np.empty(len(zw), F32)
+    invalid = np.empty(len(zw), bool)
+    for lo in range(0, len(zw), BATCH):
+        hi = lo + BATCH
+        share = _absorbance_share(L[lo:hi], D[lo:hi], zw[lo:hi], ms, overestimation)
+        with np.errstate(all="ignore"):
+            t = np.exp(-b0[lo:hi] * share).astype(F32)
+        bad = np.isnan(t)
+        invalid[lo:hi] = bad
+        T[lo:hi] = np.where(bad, F32(0.0), np.clip(t, F32(0.0), F32(1.0)))
+    return T, invalid
+
+
 def transmittance(b0: np.ndarray, moments: np.ndarray, pix: np.ndarray, zw: np.ndarray, ms: MomentSet,
                   bias: float, overestimation: float) -> tuple[np.ndarray, np.ndarray]:
     """(T, invalid): each fragment's reconstructed transmittance in front of its warped depth ``zw``, from
@@ -339,7 +411,7 @@ def transmittance(b0: np.ndarray, moments: np.ndarray, pix: np.ndarray, zw: np.n
     lit = np.flatnonzero(b0 > 0)
     if not len(lit) or not n:
         return T, invalid
-    L, D = _ldl(_matrix(normalised(b0[lit], moments[lit], ms, bias), ms))
+    L, D = factor(b0[lit], moments[lit], ms, bias)
     row = np.full(len(b0), -1, np.int64)
     row[lit] = np.arange(len(lit))
     for lo in range(0, n, BATCH):
@@ -347,10 +419,5 @@ def transmittance(b0: np.ndarray, moments: np.ndarray, pix: np.ndarray, zw: np.n
         if not len(live):
             continue
         r = row[pix[live]]
-        share = _absorbance_share(L[r], D[r], zw[live], ms, overestimation)
-        with np.errstate(all="ignore"):
-            t = np.exp(-b0[pix[live]] * share).astype(F32)
-        bad = np.isnan(t)
-        invalid[live] = bad
-        T[live] = np.where(bad, F32(0.0), np.clip(t, F32(0.0), F32(1.0)))
+        T[live], invalid[live] = transmittance_rows(L[r], D[r], b0[pix[live]], zw[live], ms, overestimation)
     return T, invalid
