@@ -105,3 +105,17 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled"]) == 0
     text = capsys.readouterr().out
     assert "95% CI" in text and "replicates of 1 SM each" in text
+
+
+def test_a_long_sampled_hold_is_waiting_not_a_deadlock():
+    """A sampled request holds its unit for the full run's load over the sample's, so no instruction may issue
+    for far longer than ``runner.no_progress_cycles`` while the run is only waiting on timed work. The watchdog
+    must not call that a deadlock (on the default scene at 512x512 it did at the default 1,000,000 cycles);
+    the cycles do not depend on the watchdog's limit."""
+    from gpusim.replay import run_timing
+    trace = trace_scene(*load_scene("default", ["screen.width=96", "screen.height=96"]), progress=False)
+    result, _, reference = run_functional(trace, "freepipe-abuffer", {})
+    cycles = [run_timing(result, trace, "sampled", load_gpu("gtx280", ["runner.workers=1",
+                                                                        f"runner.no_progress_cycles={limit}"]),
+                         reference)[0]["cycles"] for limit in (2_000, 1_000_000)]
+    assert cycles[0] == cycles[1] > 100_000

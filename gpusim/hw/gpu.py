@@ -36,7 +36,8 @@ class RunnerConfig:
 
     max_cycles: int = param(10**12, unit="cycles", doc="stop with an error past this many cycles", min=1)
     no_progress_cycles: int = param(1_000_000, unit="cycles", doc="fail with a diagnosis when no warp "
-                                    "instruction completes for this long", min=1)
+                                    "instruction completes for this long while no timed work is scheduled (a "
+                                    "deadlock)", min=1)
     max_operations: int = param(50_000_000, unit="operations", doc="the most operations the event model "
                                 "lowers at once (about 80 bytes each: 50 M is about 4 GiB); the full level "
                                 "replays a larger run a chunk of passes at a time, each within it (refused: a "

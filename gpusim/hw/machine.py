@@ -16,13 +16,16 @@ do not depend on when it starts. A
 A watchdog process guards each pass: a run that makes no progress for
 ``runner.no_progress_cycles`` (a deadlock: warps wait on each other and
 nothing is left to happen) fails naming the units and queues it is stuck on;
-``runner.max_cycles`` bounds the run.
+a stretch without issues while timed work is still scheduled (a sampled
+request's long hold) is waiting, not a deadlock. ``runner.max_cycles`` bounds
+the run.
 """
 
 from __future__ import annotations
 
 import gc
 import sys
+import weakref
 from heapq import heappush
 
 import simpy
@@ -74,6 +77,7 @@ class Machine:
         self.units: dict = {}
         self.pass_cycles: list[int] = []
         self.current_pass = 0
+        self._monitors = weakref.WeakSet()      # the watchdog, tracer and progress processes (not the run's work)
         self._assemble()
         self.core = self.units["core"]
         self.serve = [self.units[name].serve for name in program.units]    # per program unit index
@@ -173,11 +177,11 @@ class Machine:
         core.done = core.last_progress = start
         slots = core.start_pass(p, ready, self.serve)
         finished = env.all_of(slots)
-        env.process(self._watchdog(p.index, finished))
+        self._monitors.add(env.process(self._watchdog(p.index, finished)))
         if self.gpu.runner.trace_every:
-            env.process(self._tracer(p.index, finished))
+            self._monitors.add(env.process(self._tracer(p.index, finished)))
         if self.progress is not None:
-            env.process(self._report(p.index, finished))
+            self._monitors.add(env.process(self._report(p.index, finished)))
         env.run(until=finished)
         if self.progress is not None:
             self.progress.update(core.warps_done - self.progress.n)
@@ -210,15 +214,27 @@ class Machine:
         """Fail pass ``index`` when no instruction issues for ``runner.no_progress_cycles`` cycles or the clock
         passes ``runner.max_cycles``; done once the pass's warps are."""
         runner, core, env = self.gpu.runner, self.core, self.env
+        waited = 0                               # the last check that found timed work still to come
         while True:
-            deadline = min(core.last_progress + runner.no_progress_cycles, runner.max_cycles)
+            deadline = min(max(core.last_progress, waited) + runner.no_progress_cycles, runner.max_cycles)
             env.key = LAST_KEY                   # after the warps' issues of the same cycle
             yield env.timeout(max(0, deadline - env.now) + 1)
             if finished.triggered or self.current_pass != index:
                 return
             self.guard_max(env.now)
-            if env.now > core.last_progress + runner.no_progress_cycles:
+            if env.now > max(core.last_progress, waited) + runner.no_progress_cycles:
+                if self._work_pending():        # a long timed wait (a sampled request's hold), not a deadlock
+                    waited = env.now
+                    continue
                 raise NoProgress(self.diagnosis(runner.no_progress_cycles, core.last_progress))
+
+    def _work_pending(self) -> bool:
+        """Whether an event besides the monitors' (watchdog, tracer, progress bar) is scheduled: timed work of a
+        warp or unit still to come, so the run is waiting, not stuck. A sampled request holds its unit for the
+        full run's load over the sample's, which can leave no instruction issuing for millions of cycles."""
+        monitors = self._monitors
+        return any(not any(getattr(cb, "__self__", None) in monitors for cb in (event.callbacks or ()))
+                   for *_, event in self.env._queue)
 
     def _report(self, index: int, finished):
         """Count the warps done on the progress bar every ``PROGRESS_CYCLES`` while pass ``index`` runs."""
