@@ -119,3 +119,22 @@ def test_a_long_sampled_hold_is_waiting_not_a_deadlock():
                                                                         f"runner.no_progress_cycles={limit}"]),
                          reference)[0]["cycles"] for limit in (2_000, 1_000_000)]
     assert cycles[0] == cycles[1] > 100_000
+
+
+def test_a_sampled_run_over_max_operations_refuses_before_building_anything(monkeypatch):
+    """The sampled level lowers every operation before it samples: a run over ``runner.max_operations`` must
+    be refused in one line before the pieces holding them all are built (stress-layers' depth peeling, 420M
+    operations, ran out of memory there)."""
+    from gpusim.errors import GpusimError
+    from gpusim.hw import sample
+    from gpusim.replay import run_timing
+
+    def built(*_args, **_kwargs):
+        raise AssertionError("plan_pieces ran for a run over the limit")
+    monkeypatch.setattr(sample, "plan_pieces", built)
+    trace = trace_scene(*load_scene("default", ["screen.width=32", "screen.height=32"]), progress=False)
+    result, _, reference = run_functional(trace, "depth-peeling", {})
+    gpu = load_gpu("gtx280", ["runner.workers=1", "runner.max_operations=1000"])
+    with pytest.raises(GpusimError, match=r"^the run would lower [\d,]+ operations.*--fidelity analytic") as e:
+        run_timing(result, trace, "sampled", gpu, reference)
+    assert "\n" not in str(e.value)

@@ -241,6 +241,18 @@ def plan_pieces(work: Workload, passes: tuple[int, int] | None = None) -> Pieces
     return pieces
 
 
+def check_operations(plan, gpu, passes: tuple[int, int] | None = None) -> None:
+    """Refuse, in one line with advice, a run (or its passes ``passes[0]`` to ``passes[1] - 1``) that would lower
+    more than ``runner.max_operations`` operations; checked before anything is built for them."""
+    total_ops = plan.total_ops() if passes is None else int(pass_operations(plan)[passes[0]:passes[1]].sum())
+    limit = gpu.runner.max_operations
+    if total_ops > limit:
+        raise GpusimError(f"the run would lower {total_ops:,} operations, over runner.max_operations = {limit:,} "
+                          f"(the event model needs about 80 bytes per operation; the sampled level lowers them all "
+                          f"before it samples); use --fidelity analytic, which estimates the run without lowering, "
+                          f"or a smaller trace")
+
+
 def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
           pieces: list[_Piece] | None = None) -> Program:
     """Warp instructions of ``work.plan`` on ``gpu``.
@@ -258,13 +270,7 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
     """
     plan = work.plan
     p_first, p_end = passes if passes is not None else (0, len(plan.passes))
-    total_ops = plan.total_ops() if passes is None else int(pass_operations(plan)[p_first:p_end].sum())
-    limit = gpu.runner.max_operations
-    if total_ops > limit:
-        raise GpusimError(f"the run would lower {total_ops:,} operations, over runner.max_operations = {limit:,} "
-                          f"(the event model needs about 80 bytes per operation; the sampled level lowers them all "
-                          f"before it samples); use --fidelity analytic, which estimates the run without lowering, "
-                          f"or a smaller trace")
+    check_operations(plan, gpu, passes)
     ws = gpu.core.warp_size
     n_pass = p_end - p_first
     modes = [thread_mapping(gpu, p) for p in plan.passes[p_first:p_end]]

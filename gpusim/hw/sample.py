@@ -50,7 +50,7 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import Workload, lower, plan_pieces, thread_mapping
+from gpusim.hw.lower import Workload, check_operations, lower, plan_pieces, thread_mapping
 from gpusim.hw.program import Program
 from gpusim.hw.raster import per_triangle_cycles
 from gpusim.opplan import OPS
@@ -301,6 +301,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     small = scaled_gpu(gpu, sms)
     reps = Replicates(work, gpu, share)
     front = per_triangle_cycles(gpu)
+    check_operations(work.plan, gpu)         # before the pieces, which hold every operation of the run
     rmw_all = rmw_threads(work.plan, work)
     pieces = plan_pieces(work)
     runs: list[dict] = []
