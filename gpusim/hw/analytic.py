@@ -131,7 +131,7 @@ def _hottest(addr: np.ndarray) -> int:
 def _warp_max(values: np.ndarray, ws: int) -> np.ndarray:
     """Per warp of ``ws`` consecutive lanes, the largest value."""
     full = len(values) - len(values) % ws
-    head = values[:full].reshape(-1, ws).max(axis=1)
+    head = np.maximum.reduceat(values[:full], np.arange(0, full, ws)) if full else values[:0]
     if full == len(values):
         return head
     return np.append(head, max(values[full:].max(), values.dtype.type(0)))    # a partial warp, padded with 0
@@ -182,7 +182,10 @@ def _expand_pass(g, n):
     p = np.asarray(g.pass_of(i, seq), np.int64)
     key = p * n + i
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
-        key = np.sort(key)
+        # i ascends (thread order), so ordering by pass, ties kept, sorts the keys: a radix sort when the passes
+        # fit 16 bits
+        small = len(p) and 0 <= int(p.min()) and int(p.max()) < 2**15
+        key = key[np.argsort(p.astype(np.int16) if small else p, kind="stable")]
     new = run_starts(key)
     return key[new] // n, key[new] % n, np.diff(np.append(new, len(key)))
 
@@ -198,8 +201,18 @@ class _StillIssuing:
     def size(self) -> int:
         return int(self.sizes[self.s])
 
-    def __call__(self) -> np.ndarray:
-        return np.flatnonzero(self.count > self.s)
+    def __call__(self, nested: dict | None = None) -> np.ndarray:
+        """The threads; ``nested`` holds each count array's last set, which holds this one when it was made for
+        a smaller ``s`` (the next pass picks from the last pass's threads, not from all of them)."""
+        key = (self.count.__array_interface__["data"][0], self.count.shape, self.count.strides)
+        last = nested.get(key) if nested is not None else None
+        if last is not None and last[0] < self.s:
+            got = last[1][self.count[last[1]] > self.s]
+        else:
+            got = np.flatnonzero(self.count > self.s)
+        if nested is not None:
+            nested[key] = (self.s, got)
+        return got
 
 
 def _group_passes(g):
@@ -213,9 +226,9 @@ def _group_passes(g):
             where = {int(g.seq_pass[s]): None for s in range(int(count.max()))}
         else:
             top = int(count.max())
-            sizes = len(count) - np.searchsorted(np.sort(count), np.arange(top), side="right")
+            sizes = len(count) - np.cumsum(np.bincount(count, minlength=top + 1))[:top]   # no sort
             where = {int(g.seq_pass[s]): _StillIssuing(count, sizes, s) for s in range(top)}
-        return np.arange(n), np.ones(n, np.int64), where
+        return np.arange(n), np.broadcast_to(np.ones(1, np.int64), (n,)), where
     if g.pass_fn is not None:
         gp, li, cnt = _expand_pass(g, n)
         return li, cnt, dict(split_by(gp))
@@ -296,6 +309,103 @@ def _repeats(timed: dict, shape) -> int | None:
     return q if bound_q in VOLUME_BOUNDS and more.sum() <= REPEAT_TOLERANCE * threads_q else None
 
 
+def _take(values: np.ndarray, idx) -> np.ndarray:
+    """``values[idx]``, a broadcast again when ``values`` is one (one value for every thread)."""
+    if len(values) > 1 and values.strides[0] == 0:
+        return np.broadcast_to(values[:1], (len(idx),))
+    return values[idx]
+
+
+def _uniform(counts: np.ndarray) -> tuple[int, bool]:
+    """The first count, and whether every count equals it (no pass over a broadcast)."""
+    if not len(counts):
+        return 0, False
+    c0 = int(counts[0])
+    return c0, (counts.strides[0] == 0 or int(counts.min()) == c0 == int(counts.max()))
+
+
+def _chain_on_lanes(adds: list):
+    """Each lane's dependent chain on the sorted keys of the pass's largest group, when every other group's
+    lanes are among them: (keys, cycles per key), adding each group's cycles in program order as
+    :func:`_chain_on_range` does (so the same sums), without an array over the key range; None otherwise."""
+    top = max(adds, key=lambda a: len(a[0][6]))
+    k0 = top[0][6]
+    k_lo, k_hi = int(k0[0]), int(k0[-1])
+    contiguous = k_hi - k_lo + 1 == len(k0)
+    start = np.float64(0.0)                  # the groups on every lane first: a number (the same sums)
+    lead = 0
+    for got, add, _ in adds:
+        if not ((got is top[0] or got[6] is k0) and np.ndim(add) == 0):
+            break
+        start, lead = start + add, lead + 1
+    vals = np.full(len(k0), start)
+    mask = rel = None
+    for got, add, how in adds[lead:]:
+        keys = got[6]
+        if got is top[0] or keys is k0:
+            vals += add
+            continue
+        if not len(keys) or int(keys[0]) < k_lo or int(keys[-1]) > k_hi:
+            return None
+        if contiguous:
+            pos = keys - k_lo
+        elif how is not None and top[2] is not None and how[0] is top[2][0]:
+            # both a seq_pass group's threads still issuing, on the same threads: this one's among the top's
+            among = how[1][top[2][3]] > how[2]
+            if np.ndim(add) == 0:
+                if np.count_nonzero(among) != len(keys):
+                    return None
+                np.add(vals, add, out=vals, where=among)     # only there: the same sums, no positions
+                continue
+            pos = np.flatnonzero(among)
+            if len(pos) != len(keys):
+                return None
+        elif 32 * len(keys) < len(k0):
+            pos = np.searchsorted(k0, keys)
+            if not (k0[pos] == keys).all():
+                return None
+        else:
+            if mask is None:
+                mask, rel = np.zeros(k_hi - k_lo + 1, bool), k0 - k_lo
+            mask[keys - k_lo] = True
+            pos = np.flatnonzero(mask[rel])
+            mask[keys - k_lo] = False
+            if len(pos) != len(keys):
+                return None
+        vals[pos] += add
+    if all(np.ndim(a) == 0 for _, a, _ in adds) and np.ndim(top[1]) == 0 and top[1] > 0 and \
+            all(a >= 0 for _, a, _ in adds):
+        return k0, vals                        # every lane's chain is positive
+    nz = vals > 0
+    return (k0, vals) if nz.all() else (k0[nz], vals[nz])
+
+
+def _chain_on_range(adds: list):
+    """Each lane's dependent chain on an array over the key range: (keys with a chain, their cycles)."""
+    chain = None
+    positions: dict = {}                  # present lanes' positions in the chain array
+    for got, add, _ in adds:
+        lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
+        if present is None:
+            present = lanes - lo
+        base, have = chain if chain is not None else (lo, np.zeros(0))
+        if lo < base or lo + size > base + len(have):
+            new_base = min(base, lo)
+            grown = np.zeros(max(base + len(have), lo + size) - new_base)
+            grown[base - new_base:base - new_base + len(have)] = have
+            base, have = new_base, grown
+            chain = (base, have)
+        if len(present) == size:            # every key of the range
+            have[lo - base:lo - base + size] += add
+        else:                               # (groups on the same lanes share the positions)
+            held_at = positions.get((id(got), lo - base))
+            if held_at is None or held_at[0] is not got:
+                held_at = positions[id(got), lo - base] = (got, present + (lo - base))
+            have[held_at[1]] += add
+    present = np.flatnonzero(chain[1] > 0)        # every lane issues, so a present lane has a chain
+    return chain[0] + present, chain[1][present]
+
+
 def analytic_timing(result, work, gpu) -> dict:
     plan, bases = result.plan, result.bases()
     c, m = gpu.core, gpu.memory
@@ -325,6 +435,9 @@ def analytic_timing(result, work, gpu) -> dict:
     quad_memo = _QuadMemo()                   # passes over the same fragments (depth peeling's) share their quads
     timed: dict[tuple, tuple] = {}            # a pass's key -> the last pass timed with it, its groups' threads
     whole_groups: list = []                   # the last groups met whole: (threads, triangle mapping, lane info)
+    nested: dict = {}                         # each count array's threads still issuing, as the last pass had them
+    ascending: dict = {}                      # group -> whether its thread ids ascend
+    units_of: dict = {}                       # ROP group -> the unit of each of its threads' first address
     for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
         if pk.kind == "flush":
             cyc = flush_cycles(c, -(-work.width * work.height // ws)) + overhead
@@ -341,12 +454,11 @@ def analytic_timing(result, work, gpu) -> dict:
             total += passes[q]["cycles"]
             continue
         last_producer, waited = None, False
-        chain = None                          # (first lane key, dependent-chain cycles per lane key from it)
+        adds: list = []                       # each group's lane info, dependent-chain cycles per lane, threads
         pass_keys: list = []                  # the lane keys of each group in the pass
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
         packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
         still: dict = {}                      # the threads still issuing, by count array and op
-        positions: dict = {}                  # present lanes' positions in the chain array
         lane_cache: list = []                 # [(threads, (lanes, first key, key range, threads per present
                                               #   lane, present lanes from the first, warp max, lane keys,
                                               #   whether each lane runs one thread))]
@@ -357,12 +469,19 @@ def analytic_timing(result, work, gpu) -> dict:
             g = plan.groups[gi]
             li, cnt, where = placement[gi]
             sel = where[p]
-            memo = None
+            memo = issuing = None
             if isinstance(sel, _StillIssuing):   # groups over one count array (views of it) share the threads
+                issuing = sel
                 memo = (sel.count.__array_interface__["data"][0], sel.count.shape, sel.count.strides, sel.s)
-                sel = still[memo] if memo in still else still.setdefault(memo, sel())
+                sel = still[memo] if memo in still else still.setdefault(memo, sel(nested))
             n = len(g.thread)
             thread = ids[gi]
+            if gi not in ascending:
+                ascending[gi] = isinstance(g.thread, ThreadRange) or len(thread) < 2 or \
+                    bool((thread[1:] > thread[:-1]).all())
+            # lanes in ascending order, one thread each, known without a pass over them: all of the group's, or
+            # a seq_pass group's threads still issuing (lanes 0..n-1 of its, picked in order)
+            known = not triangles and ascending[gi] and (sel is None or issuing is not None)
             compute = g.is_compute
             cls, produces = (None, False) if compute else (entry_unit(g.op), g.op in PRODUCES)
             nb = g.bytes if not callable(g.bytes) else None
@@ -371,9 +490,9 @@ def analytic_timing(result, work, gpu) -> dict:
             elif g.seq_pass is not None:          # lanes 0..n-1, an operation each (_group_passes)
                 lanes_sel, counts = sel, cnt[:len(sel)]
             else:
-                lanes_sel, counts = li[sel], cnt[sel]
+                lanes_sel, counts = li[sel], _take(cnt, sel)
             if compute:                       # ALU work: its instructions stand for the operation count
-                counts = np.asarray(g.instructions)[lanes_sel]
+                counts = _take(np.asarray(g.instructions), lanes_sel)
             else:
                 used[p].add(cls)
             # per lane: the group's threads it runs (several fragments of one triangle); groups of one pass on
@@ -386,28 +505,33 @@ def analytic_timing(result, work, gpu) -> dict:
                 lanes = thread if sel is None else thread[lanes_sel]
                 if triangles:
                     lanes = work.frag_prim[lanes]
-                lo = int(lanes.min())           # lane keys from lo (a batch's fragments are a slice of them)
-                size = int(lanes.max()) + 1 - lo
-                # the lanes present (offsets from lo, ascending) and the threads each runs: a thread per lane when
-                # the threads are ascending lanes (a fragment or pixel each), no pass over the whole key range
-                distinct = len(lanes) < 2 or bool((lanes[1:] > lanes[:-1]).all())
+                # the lanes present (offsets from lo, ascending; None: lanes - lo) and the threads each runs (None:
+                # one each): a thread per lane when the threads are ascending lanes (a fragment or pixel each), no
+                # pass over the whole key range
+                distinct = known or len(lanes) < 2 or bool((lanes[1:] > lanes[:-1]).all())
                 if distinct:
-                    present, threads_in, keys = lanes - lo, np.ones(len(lanes), np.int64), lanes
+                    lo = int(lanes[0])          # lane keys from lo (a batch's fragments are a slice of them)
+                    size = int(lanes[-1]) + 1 - lo
+                    present, threads_in, keys = None, None, lanes
+                    warp_threads = -(-len(lanes) // ws) if packing.warp is None else \
+                        packing.warp_max(np.ones(len(lanes), np.int64), keys).sum()
                 else:
+                    lo = int(lanes.min())
+                    size = int(lanes.max()) + 1 - lo
                     threads_in = np.bincount(lanes - lo, minlength=size)
                     present = np.flatnonzero(threads_in)
                     threads_in, keys = threads_in[present], lo + present
-                got = (lanes, lo, size, threads_in, present, packing.warp_max(threads_in, keys).sum(), keys, distinct)
+                    warp_threads = packing.warp_max(threads_in, keys).sum()
+                got = (lanes, lo, size, threads_in, present, warp_threads, keys, distinct)
                 cached.append((thread, memo, got))
                 if sel is None and packing.warp is None:
                     whole_groups = [(thread, triangles, got)] + whole_groups[:WHOLE_GROUPS - 1]
             lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
             pass_keys.append(keys)
-            c0 = int(counts[0]) if len(counts) else 0
-            uniform = len(counts) and int(counts.min()) == c0 == int(counts.max())
-            # per present lane: its operations
+            c0, uniform = _uniform(counts)
+            # per present lane: its operations (not needed when every lane runs one thread with the same count)
             if uniform:
-                per_lane = threads_in if c0 == 1 else threads_in * c0
+                per_lane = None if threads_in is None else threads_in if c0 == 1 else threads_in * c0
             elif distinct:
                 per_lane = np.asarray(counts, np.float64)
             else:
@@ -418,10 +542,10 @@ def analytic_timing(result, work, gpu) -> dict:
                 alu[p] += busiest * alu_cost
             else:
                 wis[p] += busiest
-            ops = float(counts.sum())
+            ops = float(c0 * len(counts) if uniform else counts.sum())
             # first operation of each thread: coalescing (on a spread sample of warps) and the hottest address
             # threads with no operation in this group have no address (a list walk of zero nodes)
-            live = None if not len(counts) or int(counts.min()) > 0 else counts > 0
+            live = None if not len(counts) or (c0 if uniform else int(counts.min())) > 0 else counts > 0
             lanes_live = lanes_sel if live is None else lanes_sel[live]
             counts_live = counts if live is None else counts[live]
             if not len(lanes_live) or compute:
@@ -437,6 +561,8 @@ def analytic_timing(result, work, gpu) -> dict:
                 req_bytes = min(max(segment, SECTOR),
                                 -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
                 dram_bytes[p] += ops * requests_per_lane * req_bytes
+            elif cls == ROP and g.seq_pass is not None and len(placement[gi][2]) > 1:
+                addr = None
             else:
                 zero = np.broadcast_to(np.zeros(1, np.int64), lanes_live.shape)
                 addr = bases[g.structure] + np.asarray(g.offset(lanes_live, zero), np.int64)
@@ -446,7 +572,15 @@ def analytic_timing(result, work, gpu) -> dict:
                 atomic_ops[p] += ops
                 hottest[p] = max(hottest[p], float(_hottest(addr)))
             elif cls == ROP:
-                unit = interleave(addr, m.interleave_bytes, gpu.rop.units)
+                if addr is None:                # a group over many passes: each thread's unit, found once
+                    if gi not in units_of:
+                        every = np.arange(n, dtype=np.int64)
+                        units_of[gi] = interleave(bases[g.structure] + np.asarray(
+                            g.offset(every, np.broadcast_to(np.zeros(1, np.int64), every.shape)), np.int64),
+                            m.interleave_bytes, gpu.rop.units).astype(np.min_scalar_type(gpu.rop.units))
+                    unit = units_of[gi][lanes_live]
+                else:
+                    unit = interleave(addr, m.interleave_bytes, gpu.rop.units)
                 svc = (gpu.blender.cycles_per_op + (nb or 0) / gpu.blender.bytes_per_cycle
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
                 rop_unit[p] += np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
@@ -463,32 +597,21 @@ def analytic_timing(result, work, gpu) -> dict:
             if g.dep and produces:
                 add += (c0 if same else per_lane) * lat[cls]
             elif g.dep and lp is not None and not waited:
-                add += (1 if same else threads_in) * lat[lp]
-            base, have = chain if chain is not None else (lo, np.zeros(0))
-            if lo < base or lo + size > base + len(have):
-                new_base = min(base, lo)
-                grown = np.zeros(max(base + len(have), lo + size) - new_base)
-                grown[base - new_base:base - new_base + len(have)] = have
-                base, have = new_base, grown
-                chain = (base, have)
-            if len(present) == size:            # every key of the range
-                have[lo - base:lo - base + size] += add
-            else:                               # (groups on the same lanes share the positions)
-                held_at = positions.get((id(present), lo - base))
-                if held_at is None or held_at[0] is not present:
-                    held_at = positions[id(present), lo - base] = (present, present + (lo - base))
-                have[held_at[1]] += add
+                add += (1 if same or threads_in is None else threads_in) * lat[lp]
+            adds.append((got, add, (thread, issuing.count, issuing.s, sel) if known and issuing is not None
+                         and g.seq_pass is not None else None))
             if produces:
                 last_producer, waited = cls, False
             elif g.dep:
                 waited = True
-        if chain is None:
+        if not adds:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"})
             total += overhead
             continue
-        present = np.flatnonzero(chain[1] > 0)        # every lane issues, so a present lane has a chain
-        lane_chain = chain[1][present]
-        wchain = packing.warp_max(lane_chain, chain[0] + present)
+        chain = _chain_on_lanes(adds)
+        chain_keys, lane_chain = chain if chain is not None else _chain_on_range(adds)
+        del adds, chain
+        wchain = packing.warp_max(lane_chain, chain_keys)
         n_warps = len(wchain)
         sm = SimtCore.place(n_warps, c.sms)
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
@@ -502,7 +625,7 @@ def analytic_timing(result, work, gpu) -> dict:
             "rop": float(rop_unit[p].max()),
         }
         if held:
-            bounds["scoreboard"] = _scoreboard_bound(held, chain[0] + present, wchain, packing, gpu.scoreboard.entries)
+            bounds["scoreboard"] = _scoreboard_bound(held, chain_keys, wchain, packing, gpu.scoreboard.entries)
         mapping = thread_mapping(gpu, pk)
         keys = _lane_keys(pass_keys) if mapping in ("fragment", "triangle") else np.zeros(0, np.int64)
         if mapping == "fragment" and len(keys) and packing.warp is None:
