@@ -78,7 +78,7 @@ def _union(parts: list) -> np.ndarray:
 WHOLE_GROUPS = 2      # lane information of whole groups kept from pass to pass (depth peeling's every-pass loads)
 
 
-def _thread_ids(plan) -> list[np.ndarray]:
+def _thread_ids(plan, arange=np.arange) -> list[np.ndarray]:
     """Each group's thread ids, made once: the groups over ``0..n-1`` share one ``arange`` (depth peeling's
     groups over every fragment would make one per group and pass)."""
     ranges: dict[int, np.ndarray] = {}
@@ -86,7 +86,7 @@ def _thread_ids(plan) -> list[np.ndarray]:
     for g in plan.groups:
         if isinstance(g.thread, ThreadRange):
             n = len(g.thread)
-            out.append(ranges[n] if n in ranges else ranges.setdefault(n, g.thread_ids()))
+            out.append(ranges[n] if n in ranges else ranges.setdefault(n, arange(n)))
         else:
             out.append(g.thread_ids())
     return out
@@ -180,6 +180,10 @@ def _expand_pass(g, n):
     """(pass, lane index into g.thread, ops) per (pass, thread) of a group spanning passes."""
     i, seq = g.expand_ops()
     p = np.asarray(g.pass_of(i, seq), np.int64)
+    if len(i) == n > 1 and seq.strides[0] == 0 and 0 <= int(p.min()) and int(p.max()) < 2**15:
+        # an op per thread (i = 0..n-1): the keys are distinct, the lanes those of each pass in thread order
+        order = np.argsort(p.astype(np.int16), kind="stable")
+        return p[order], order, np.broadcast_to(np.ones(1, np.int64), (n,))
     key = p * n + i
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
         # i ascends (thread order), so ordering by pass, ties kept, sorts the keys: a radix sort when the passes
@@ -215,7 +219,18 @@ class _StillIssuing:
         return got
 
 
-def _group_passes(g):
+class _Aranges:
+    """``arange(n)`` for any ``n`` as a view of one array (the groups' lane indices would otherwise hold an
+    ``arange`` each: a multi-pass k-buffer's groups of every pass, gigabytes at tens of millions of fragments)."""
+
+    def __init__(self, n: int):
+        self.whole = np.arange(n, dtype=np.int64)
+
+    def __call__(self, n: int) -> np.ndarray:
+        return self.whole[:n] if n <= len(self.whole) else np.arange(n, dtype=np.int64)
+
+
+def _group_passes(g, arange=np.arange):
     """Where group ``g``'s operations fall: (lane index into ``g.thread``, ops, {pass: selection}) with the
     selection of each pass's lanes into the first two (None: all of them; a :class:`_StillIssuing` for a
     ``seq_pass`` group whose threads issue different numbers of ops)."""
@@ -228,13 +243,13 @@ def _group_passes(g):
             top = int(count.max())
             sizes = len(count) - np.cumsum(np.bincount(count, minlength=top + 1))[:top]   # no sort
             where = {int(g.seq_pass[s]): _StillIssuing(count, sizes, s) for s in range(top)}
-        return np.arange(n), np.broadcast_to(np.ones(1, np.int64), (n,)), where
+        return arange(n), np.broadcast_to(np.ones(1, np.int64), (n,)), where
     if g.pass_fn is not None:
         gp, li, cnt = _expand_pass(g, n)
         return li, cnt, dict(split_by(gp))
     if np.isscalar(g.pass_index):
-        return np.arange(n), g.count, {int(g.pass_index): None}
-    return np.arange(n), g.count, dict(split_by(np.asarray(g.pass_index, np.int64)))
+        return arange(n), g.count, {int(g.pass_index): None}
+    return arange(n), g.count, dict(split_by(np.asarray(g.pass_index, np.int64)))
 
 
 REPEAT_TOLERANCE = 0.01    # a pass whose groups each differ from a timed pass's by at most this share of their threads
@@ -424,8 +439,9 @@ def analytic_timing(result, work, gpu) -> dict:
     rop_unit = np.zeros((n_pass, gpu.rop.units))
     used: list[set] = [set() for _ in range(n_pass)]
     # where each group's operations fall: per pass, the threads (None: all) issuing them
-    placement = [_group_passes(g) for g in plan.groups]
-    ids = _thread_ids(plan)
+    aranges = _Aranges(max((len(g.thread) for g in plan.groups), default=0))
+    placement = [_group_passes(g, aranges) for g in plan.groups]
+    ids = _thread_ids(plan, aranges)
     groups_of_pass: list[list[int]] = [[] for _ in range(n_pass)]
     for gi, (_, _, where) in enumerate(placement):
         for p in where:
