@@ -205,18 +205,36 @@ class _StillIssuing:
     def size(self) -> int:
         return int(self.sizes[self.s])
 
-    def __call__(self, nested: dict | None = None) -> np.ndarray:
-        """The threads; ``nested`` holds each count array's last set, which holds this one when it was made for
-        a smaller ``s`` (the next pass picks from the last pass's threads, not from all of them)."""
-        key = (self.count.__array_interface__["data"][0], self.count.shape, self.count.strides)
+    def __call__(self, nested: dict | None = None, recent: list = ()) -> np.ndarray:
+        """The threads; ``nested`` holds each count array's last set (``count_key``: its ``s``, the set, the set
+        it was picked from, the mask picking it), which holds this one when it was made for a smaller ``s``
+        (the next pass picks from the last pass's threads, not from all of them). ``recent``: other sorted sets
+        of threads made lately; the smallest holding as many of these threads as there are is picked from
+        instead (a pick of that many from it is these threads), and when it holds nothing else it is the set
+        (the R-buffer's writes back in one pass are the threads reading in the next)."""
+        key = count_key(self.count)
         last = nested.get(key) if nested is not None else None
+        want = self.size()
+        sources = sorted((x for x in recent if len(x) >= want and int(x[-1]) < len(self.count)), key=len)[:1]
         if last is not None and last[0] < self.s:
-            got = last[1][self.count[last[1]] > self.s]
-        else:
+            sources.append(last[1])
+        got = src = mask = None
+        for cand in sources:
+            m = self.count[cand] > self.s
+            k = int(np.count_nonzero(m))
+            if k == want:
+                src, mask, got = cand, m, cand if k == len(cand) else cand[m]
+                break
+        if got is None:
             got = np.flatnonzero(self.count > self.s)
         if nested is not None:
-            nested[key] = (self.s, got)
+            nested[key] = (self.s, got, src, mask)
         return got
+
+
+def count_key(count: np.ndarray) -> tuple:
+    """One count array (a view of it alike) as a dict key."""
+    return count.__array_interface__["data"][0], count.shape, count.strides
 
 
 class _Aranges:
@@ -339,7 +357,7 @@ def _uniform(counts: np.ndarray) -> tuple[int, bool]:
     return c0, (counts.strides[0] == 0 or int(counts.min()) == c0 == int(counts.max()))
 
 
-def _chain_on_lanes(adds: list):
+def _chain_on_lanes(adds: list, nested: dict):
     """Each lane's dependent chain on the sorted keys of the pass's largest group, when every other group's
     lanes are among them: (keys, cycles per key), adding each group's cycles in program order as
     :func:`_chain_on_range` does (so the same sums), without an array over the key range; None otherwise."""
@@ -366,7 +384,9 @@ def _chain_on_lanes(adds: list):
             pos = keys - k_lo
         elif how is not None and top[2] is not None and how[0] is top[2][0]:
             # both a seq_pass group's threads still issuing, on the same threads: this one's among the top's
-            among = how[1][top[2][3]] > how[2]
+            made = nested.get(count_key(how[1]))
+            among = made[3] if made is not None and made[1] is how[3] and made[2] is top[2][3] else \
+                how[1][top[2][3]] > how[2]
             if np.ndim(add) == 0:
                 if np.count_nonzero(among) != len(keys):
                     return None
@@ -452,6 +472,8 @@ def analytic_timing(result, work, gpu) -> dict:
     timed: dict[tuple, tuple] = {}            # a pass's key -> the last pass timed with it, its groups' threads
     whole_groups: list = []                   # the last groups met whole: (threads, triangle mapping, lane info)
     nested: dict = {}                         # each count array's threads still issuing, as the last pass had them
+    last_still: list = []                     # the threads still issuing of the last pass timed
+    sel_lanes: dict = {}                      # the last pass's lane info of threads still issuing, by their set
     ascending: dict = {}                      # group -> whether its thread ids ascend
     units_of: dict = {}                       # ROP group -> the unit of each of its threads' first address
     for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
@@ -475,6 +497,7 @@ def analytic_timing(result, work, gpu) -> dict:
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
         packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
         still: dict = {}                      # the threads still issuing, by count array and op
+        made_lanes: dict = {}                 # their lane info, by set (sel_lanes of the next pass)
         lane_cache: list = []                 # [(threads, (lanes, first key, key range, threads per present
                                               #   lane, present lanes from the first, warp max, lane keys,
                                               #   whether each lane runs one thread))]
@@ -489,7 +512,8 @@ def analytic_timing(result, work, gpu) -> dict:
             if isinstance(sel, _StillIssuing):   # groups over one count array (views of it) share the threads
                 issuing = sel
                 memo = (sel.count.__array_interface__["data"][0], sel.count.shape, sel.count.strides, sel.s)
-                sel = still[memo] if memo in still else still.setdefault(memo, sel(nested))
+                sel = still[memo] if memo in still else still.setdefault(memo, sel(nested, [*still.values(),
+                                                                                               *last_still]))
             n = len(g.thread)
             thread = ids[gi]
             if gi not in ascending:
@@ -517,6 +541,11 @@ def analytic_timing(result, work, gpu) -> dict:
             cached = lane_cache if sel is None or memo is not None else []
             got = next((v for th, key, v in cached
                         if key == memo and (th is thread or (len(th) == n and np.array_equal(th, thread)))), None)
+            if got is None and memo is not None and packing.warp is None:    # the same set in the last pass
+                was = sel_lanes.get(id(sel))
+                if was is not None and was[0] is sel and was[1] is thread and was[2] == triangles:
+                    got = was[3]
+                    cached.append((thread, memo, got))
             if got is None:
                 lanes = thread if sel is None else thread[lanes_sel]
                 if triangles:
@@ -542,6 +571,8 @@ def analytic_timing(result, work, gpu) -> dict:
                 cached.append((thread, memo, got))
                 if sel is None and packing.warp is None:
                     whole_groups = [(thread, triangles, got)] + whole_groups[:WHOLE_GROUPS - 1]
+            if memo is not None and packing.warp is None:
+                made_lanes[id(sel)] = (sel, thread, triangles, got)
             lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
             pass_keys.append(keys)
             c0, uniform = _uniform(counts)
@@ -620,11 +651,12 @@ def analytic_timing(result, work, gpu) -> dict:
                 last_producer, waited = cls, False
             elif g.dep:
                 waited = True
+        last_still, sel_lanes = list(still.values()), made_lanes
         if not adds:
             passes.append({"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"})
             total += overhead
             continue
-        chain = _chain_on_lanes(adds)
+        chain = _chain_on_lanes(adds, nested)
         chain_keys, lane_chain = chain if chain is not None else _chain_on_range(adds)
         del adds, chain
         wchain = packing.warp_max(lane_chain, chain_keys)
