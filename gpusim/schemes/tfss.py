@@ -116,21 +116,30 @@ class TFSS(Scheme):
         ez = early_z(trace, g, plan, 1, fb_bytes, unorm_rounder(bits))
 
         cand = np.flatnonzero(ez.stored)
-        col = stored_colours(np.take(trace.rgba, cand, axis=0), bits, 8 * self.fragment_bytes, lze)
-        frag_bits = np.zeros(n, np.int64)
-        frag_bits[cand] = col.bits
-        exact_fit = lze == "off" and self.section_bytes in (0, L * self.fragment_bytes)
-        in_stored = ez.stored[g.by_arrival]
+        in_stored = ez.stored_by_arrival
         stored_order, stored_pix = g.by_arrival[in_stored], g.pix_by_arrival[in_stored]
+        # the stored fragments' colours by pixel in arrival order (as place and the read pass take them)
+        col = stored_colours(np.take(trace.rgba, stored_order, axis=0), bits, 8 * self.fragment_bytes, lze)
+        frag_bits = np.zeros(n, np.int64)
+        frag_bits[stored_order] = col.bits
+        exact_fit = lze == "off" and self.section_bytes in (0, L * self.fragment_bytes)
         pl = place(pix, stored_order, n, L, None if exact_fit else frag_bits, None if exact_fit else 8 * M,
-                   stored_pix)
+                   stored_pix, None if exact_fit else col.bits)
 
         openers = np.flatnonzero(pl.opener)                 # submission order = allocation order
         n_s = len(openers)
-        section = SectionIndex(pix[openers], pl.chain[openers], np.arange(n_s))
+        nsec = np.bincount(pix[openers], minlength=P)
+        # the kept fragments by pixel in arrival order: each pixel's sections in chain order, each opened by
+        # the first fragment in it
+        read = pl.kept[stored_order] if pl.kept_given is None else pl.kept_given
+        read_order = stored_order[read]
+        opens = (pl.slot[read_order] if pl.slot_given is None else pl.slot_given[read]) == 0
+        section_id = np.empty(n, np.int64)
+        section_id[openers] = np.arange(n_s)
+        section = SectionIndex.grouped(nsec, section_id[read_order[opens]])
         kept = np.flatnonzero(pl.kept)
         sec_of = np.full(n, -1, np.int64)
-        sec_of[kept] = section(pix[kept], pl.chain[kept])
+        sec_of[read_order] = section.ids[np.cumsum(opens) - 1]
         t_off = sec_of * M + pl.bits_before // 8
         t_bytes = -(-frag_bits // 8)
         lt_field = length_field_bits(bits, lze)
@@ -155,10 +164,7 @@ class TFSS(Scheme):
                      lambda i, s: sec_of[kept[i]] * lt_bytes + pl.slot[kept[i]] * lt_field // 8, 1, dep=True)
 
         # read (Figure 3-9), one thread per pixel
-        read = pl.kept[stored_order]
-        read_order = stored_order[read]
         rpix, rstart, rcount = read_runs(pix, read_order, P, stored_pix[read])
-        nsec = np.bincount(pix[openers], minlength=P)
         if self.read_scan == "all":
             plan.add(2, "load", "ssa_table", P, 1, lambda i, s: i * SA, SA)
         else:
@@ -172,10 +178,15 @@ class TFSS(Scheme):
         plan.add(2, "load", "t_buffer", rpix, rcount, lambda i, s: t_off[read_order[rstart[i] + s]],
                  lambda i, s: t_bytes[read_order[rstart[i] + s]], dep=True)
         vis = ez.visible & pl.kept
-        m = np.bincount(pix[vis], minlength=P)[rpix]        # visible fragments per pixel read
+        visible_count = np.bincount(pix[vis], minlength=P)
+        m = visible_count[rpix]                             # visible fragments per pixel read
         plan.compute(2, rpix, weight_factor_work(m) + m * (LEADING_ZEROS_DECODE if lze != "off" else 0))
-        blended = resolve_writes(plan, 2, pix, vis, P, fb_bytes)
-        image, order = weighted_image(trace, g, vis, cand, col, ez.opaque_rgb, self.ties)
+        blended = resolve_writes(plan, 2, pix, vis, P, fb_bytes, visible_count)
+        kept_by_arrival = in_stored.copy()
+        kept_by_arrival[in_stored] = read
+        image, order, order_pix = weighted_image(trace, g, vis, stored_order, col, ez.opaque_rgb, self.ties,
+                                                 ez.visible_by_arrival & kept_by_arrival, ez.key_by_arrival,
+                                                 np.cumsum(in_stored) - 1, with_pixels=True)
 
         stored_bits = int(frag_bits[kept].sum())
         struct = [
@@ -209,5 +220,5 @@ class TFSS(Scheme):
         return SchemeResult(
             self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
             dropped_fragments=len(unfit), overflowed_pixels=int(len(np.unique(pix[unfit]))),
-            lists=CapturedLists(pix[order], order), stats=stats,
+            lists=CapturedLists(order_pix, order), stats=stats,
             extras={"read_per_pixel": np.bincount(pix[kept], minlength=P)})

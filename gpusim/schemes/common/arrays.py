@@ -168,6 +168,35 @@ def sort_within_runs(pix_sorted: np.ndarray, key: np.ndarray) -> np.ndarray:
     return lex_order(np.repeat(np.arange(len(start)), np.diff(np.r_[start, len(pix_sorted)])), key)
 
 
+def sort_short_runs(pix_sorted: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """:func:`sort_within_runs`, in one value sort of words packing (pixel, key, position inside the run) where
+    they fit in 64 bits: ascending non-negative runs, unsigned keys of up to 32 bits, runs short enough (up to
+    4,096 fragments beside 20-bit pixel ids); else :func:`sort_within_runs`. Equal keys keep their order in
+    the run (the position breaks the tie)."""
+    n = len(pix_sorted)
+    if n < 2 or key.dtype.kind not in "u" or key.dtype.itemsize > 4:
+        return sort_within_runs(pix_sorted, key)
+    start = run_starts(pix_sorted)
+    if len(start) > 1 and bool((pix_sorted[start[1:]] < pix_sorted[start[:-1]]).any()):
+        return sort_within_runs(pix_sorted, key)
+    length = np.diff(np.r_[start, n])
+    lowest = int(pix_sorted[0])
+    pixel_bits = (int(pix_sorted[-1]) - lowest).bit_length()
+    local_bits = max(1, (int(length.max()) - 1).bit_length())
+    key_bits = 8 * key.dtype.itemsize
+    if lowest < 0 or pixel_bits + key_bits + local_bits > 64:
+        return sort_within_runs(pix_sorted, key)
+    first = np.repeat(start, length)
+    word = (np.arange(n, dtype=np.int64) - first).view(np.uint64)        # position inside the run
+    word |= key.astype(np.uint64) << np.uint64(local_bits)
+    word |= (pix_sorted.astype(np.uint64) - np.uint64(lowest)) << np.uint64(key_bits + local_bits)
+    word.sort()
+    # the runs stay where they are: sorted word i belongs to the run at i
+    word &= np.uint64((1 << local_bits) - 1)
+    first += word.view(np.int64)
+    return first
+
+
 def reversed_runs(pix_sorted: np.ndarray) -> np.ndarray:
     """Permutation reversing the order inside each run of a grouped array (the runs stay where they are)."""
     start = run_starts(pix_sorted)

@@ -28,7 +28,7 @@ import numpy as np
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OpPlan
 from gpusim.schemes.common.arrays import put_rows
-from gpusim.schemes.common.groups import PixelGroups, segment_running_min_before
+from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.storage import DEPTH_BYTES
 from gpusim.schemes.result import Stat, Structure
 
@@ -46,6 +46,10 @@ class EarlyZ:
     uses_z: bool                # the frame has opaque fragments (else no z-buffer is built or tested)
     culled_at_arrival: int
     occluded_after_store: int
+    #: ``stored``, ``visible`` and the depth keys in the arrival order ``PixelGroups.by_arrival``
+    stored_by_arrival: np.ndarray | None = None
+    visible_by_arrival: np.ndarray | None = None
+    key_by_arrival: np.ndarray | None = None
 
     def stats(self, occluded_fate: str = "read, not blended") -> dict[str, Stat]:
         """The two discard counts every scheme on this pipeline reports."""
@@ -62,19 +66,25 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
     # in arrival order (grouped by pixel): what each pixel sees fragment after fragment
     order, pix_sorted = g.by_arrival, g.pix_by_arrival
     key, is_opaque = g.key[order], opaque[order]
-    okey = np.where(is_opaque, key.astype(np.uint64), np.uint64(0xFFFFFFFF))   # above every depth key
-    # nearest opaque depth submitted *before* each fragment at its pixel
-    before = np.minimum(segment_running_min_before(pix_sorted, okey), _FAR)
-    passes = key < before
+    okey = np.where(is_opaque, key, np.uint32(0xFFFFFFFF))   # above every depth key
+    # nearest opaque depth submitted *before* each fragment at its pixel (none before a pixel's first: far)
+    start = run_starts(pix_sorted)
+    through = _running_min_through(pix_sorted, okey)
+    passes = np.empty(g.n, bool)
+    np.less(key[1:], through[:-1], out=passes[1:])
+    passes[start] = True
     stored_sorted = ~is_opaque & passes
     # nearest opaque depth of the whole frame: the running minimum through each pixel's last fragment
-    last = np.r_[run_starts(pix_sorted)[1:], g.n] - 1 if g.n else order
+    last = np.r_[start[1:], g.n] - 1 if g.n else order
     final = np.full(trace.pixel_count, _FAR)
-    final[pix_sorted[last]] = np.minimum(np.minimum(before[last], okey[last]), _FAR)
+    final[pix_sorted[last]] = through[last]
     visible_sorted = stored_sorted & (key < final[pix_sorted])
-    stored, visible, written = np.empty(g.n, bool), np.empty(g.n, bool), np.empty(g.n, bool)
-    stored[order], visible[order] = stored_sorted, visible_sorted
-    written[order] = is_opaque & passes                       # opaque fragments passing LESS
+    # one scatter back to submission order: stored, visible and written (opaque passing LESS) as bits 0, 1, 2
+    flags_sorted = stored_sorted.view(np.uint8) | (visible_sorted.view(np.uint8) << np.uint8(1))
+    flags_sorted |= (is_opaque & passes).view(np.uint8) << np.uint8(2)
+    flags = np.empty(g.n, np.uint8)
+    flags[order] = flags_sorted
+    stored, visible, written = ((flags & np.uint8(bit)) != 0 for bit in (1, 2, 4))
     writes = np.flatnonzero(written)
     opaque_rgb = np.empty((trace.pixel_count, 3), np.float32)
     opaque_rgb[:] = colour_round(trace.background.astype(np.float32))
@@ -82,7 +92,7 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
         # the last write at a pixel is its nearest opaque fragment (first submitted among equals)
         at = np.flatnonzero(is_opaque & passes)
         winners = order[at[np.r_[pix_sorted[at][1:] != pix_sorted[at][:-1], True]]]
-        put_rows(opaque_rgb, pix[winners], colour_round(np.take(trace.rgba[:, :3], winners, axis=0)))
+        put_rows(opaque_rgb, pix[winners], colour_round(np.take(trace.rgba, winners, axis=0)[:, :3]))
     uses_z = bool(opaque.any())
     if uses_z:   # every fragment tests the z-buffer
         plan.add(pass_index, "depth_test", "z_buffer", g.n, 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES)
@@ -90,7 +100,18 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
              lambda i, s: pix[writes[i]] * framebuffer_bytes, framebuffer_bytes, dep=True)
     return EarlyZ(stored, visible, opaque_rgb, final != _FAR, uses_z,
                   culled_at_arrival=int(np.count_nonzero(~is_opaque & ~passes)),
-                  occluded_after_store=int(np.count_nonzero(stored_sorted & ~visible_sorted)))
+                  occluded_after_store=int(np.count_nonzero(stored_sorted & ~visible_sorted)),
+                  stored_by_arrival=stored_sorted, visible_by_arrival=visible_sorted, key_by_arrival=key)
+
+
+def _running_min_through(pix_sorted: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """For grouped runs of uint32 keys: the least key of each run up to and including each entry (one running
+    maximum of ``pixel << 32 | ~key``: a larger pixel id starts afresh)."""
+    word = pix_sorted.astype(np.uint64)
+    word <<= np.uint64(32)
+    word |= np.invert(key).astype(np.uint64)
+    np.maximum.accumulate(word, out=word)
+    return np.invert(word.astype(np.uint32))
 
 
 PIPELINE = ("z_buffer", "framebuffer")
@@ -107,9 +128,11 @@ def storage_bytes(structures: list[Structure]) -> int:
 
 
 def resolve_writes(plan: OpPlan, pass_index: int, pix: np.ndarray, visible: np.ndarray, pixel_count: int,
-                   framebuffer_bytes: int) -> np.ndarray:
-    """Read-pass frame-buffer load (opaque colour) and store (result) per pixel that blends; blended per pixel."""
-    blended = np.bincount(pix[visible], minlength=pixel_count)
+                   framebuffer_bytes: int, blended: np.ndarray | None = None) -> np.ndarray:
+    """Read-pass frame-buffer load (opaque colour) and store (result) per pixel that blends; blended per pixel
+    (``blended``: the visible fragments per pixel, when the caller has counted them)."""
+    if blended is None:
+        blended = np.bincount(pix[visible], minlength=pixel_count)
     bpix = np.flatnonzero(blended)
     plan.add(pass_index, "load", "framebuffer", bpix, 1, lambda i, s: bpix[i] * framebuffer_bytes,
              framebuffer_bytes)

@@ -26,7 +26,14 @@ LzeMode = Literal["off", "fixed", "variable"]
 
 def significant_bits(values: np.ndarray) -> np.ndarray:
     """Bits needed to write each non-negative integer (below 2**53) without leading zeros (0 for 0)."""
-    v = np.maximum(np.asarray(values, np.int64), 0).astype(np.float64)   # exact below 2**53
+    v = np.maximum(np.asarray(values, np.int64), 0)
+    if v.size and int(v.max()) < 1 << 16:          # small values (colour channels): look them up
+        return _significant_bits_float(np.arange(int(v.max()) + 1))[v]
+    return _significant_bits_float(v)
+
+
+def _significant_bits_float(v: np.ndarray) -> np.ndarray:
+    v = v.astype(np.float64)                      # exact below 2**53
     return np.frexp(v)[1].astype(np.int64)        # v = m * 2**e with m in [0.5, 1): e bits (0 -> 0)
 
 

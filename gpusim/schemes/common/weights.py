@@ -25,9 +25,9 @@ from typing import Literal
 
 import numpy as np
 
-from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.common.arrays import put_rows, sort_within_runs
-from gpusim.schemes.common.leading_zeros import colour_bits
+from gpusim.metrics.composite import run_starts
+from gpusim.schemes.common.arrays import lex_order, put_rows, sort_short_runs
+from gpusim.schemes.common.leading_zeros import colour_bits, significant_bits
 from gpusim.schemes.common.storage import DEPTH_BYTES
 
 Ties = Literal["arrival", "eq4"]
@@ -72,34 +72,46 @@ def premultiply(colour: np.ndarray, alpha: np.ndarray, bits: int) -> np.ndarray:
 
 
 def composite_weighted(pix: np.ndarray, key: np.ndarray, weighted: np.ndarray, alpha: np.ndarray,
-                       base: np.ndarray, ties: str) -> np.ndarray:
+                       base: np.ndarray, ties: str, rows: np.ndarray | None = None) -> np.ndarray:
     """Eq. 2-4 over grouped runs in depth order; returns (pixel_count, 3) float32.
 
     ``pix`` and ``key`` are grouped by pixel, nearest first (ties in arrival
     order); ``weighted`` is a_i c_i (N, 3); ``base`` (pixel_count, 3) is the
-    colour behind every fragment (nearest opaque, or the background).
+    colour behind every fragment (nearest opaque, or the background). With
+    ``rows``, fragment i's ``weighted`` and ``alpha`` are at ``rows[i]``.
+
+    The fragments are read once into rank-major order (every pixel's nearest, then every second nearest,
+    ..., pixels longest run first), so step k adds one contiguous block to a prefix of the pixels.
     """
     image = np.array(base, dtype=np.float32, copy=True)
     if len(pix) == 0:
         return image
-    weighted = np.asarray(weighted, np.float32)
-    alpha = np.asarray(alpha, np.float32)
-    start, _, active = runs_by_length(pix)
+    start = run_starts(pix)
+    length = np.diff(np.r_[start, len(pix)])
+    by_length = lex_order(length.max() - length)            # longest first, equal lengths in pixel order
+    start, length = start[by_length], length[by_length]
+    active = np.searchsorted(-length, -(np.arange(length[0]) + 1), side="right").tolist()
+    pos = np.concatenate([start[:m] + k for k, m in enumerate(active)])
+    at = np.r_[0, np.cumsum(active)]
+    src = pos if rows is None else rows[pos]
+    weighted = np.take(np.asarray(weighted, np.float32), src, axis=0)
+    alpha = np.take(np.asarray(alpha, np.float32), src)
+    key = key[pos] if ties == "eq4" else None
     covered = pix[start]
     trans = np.ones(len(covered), np.float32)           # product over all fragments so far
     tie_w = np.ones(len(covered), np.float32)           # weight of the current tie group (eq4)
     colour = np.zeros((len(covered), 3), np.float32)
     for k, m in enumerate(active):
-        idx = start[:m] + k
+        lo = at[k]
         if ties == "eq4" and k > 0:
-            new_group = key[idx] != key[idx - 1]
+            new_group = key[lo:lo + m] != key[at[k - 1]:at[k - 1] + m]
             tie_w[:m] = np.where(new_group, trans[:m], tie_w[:m])
             w = tie_w[:m]
         else:
             tie_w[:m] = trans[:m]
             w = trans[:m]
-        colour[:m] += w[:, None] * np.take(weighted, idx, axis=0)
-        trans[:m] *= np.float32(1.0) - alpha[idx]
+        colour[:m] += w[:, None] * weighted[lo:lo + m]
+        trans[:m] *= np.float32(1.0) - alpha[lo:lo + m]
     put_rows(image, covered, colour + trans[:, None] * np.take(image, covered, axis=0))
     return image
 
@@ -116,14 +128,28 @@ class StoredColours:
 def stored_colours(rgba: np.ndarray, bits: int, fragment_bits: int, lze: str) -> StoredColours:
     """Quantise to ``bits`` per channel, compress (gpusim.schemes.common.leading_zeros), return the blended values."""
     top = np.float32((1 << bits) - 1)
-    c = _unorm_steps(rgba[:, :3], bits)           # whole numbers: exact in float32 and int64 alike
-    a = _unorm_steps(rgba[:, 3], bits)
+    steps = _unorm_steps(rgba, bits)              # whole numbers: exact in float32 and int64 alike
+    c, a = steps[:, :3], steps[:, 3]
     alpha = a.astype(np.float32) / top
     if lze == "off":
         weighted = c.astype(np.float32)
         weighted /= top
         weighted *= alpha[:, None]
         rgb_bits = np.full(len(c), 3 * bits, np.int64)
+    elif bits <= 8 and lze in ("fixed", "variable"):
+        # every (colour, alpha) pair's premultiplied value and its significant bits from tables of
+        # (2**bits)**2 entries (the longest channel is the one with the most significant bits)
+        every = np.arange(1 << bits, dtype=np.int64)
+        table = ((every[:, None] * every + (1 << bits) // 2 - 1) // ((1 << bits) - 1)).ravel()   # premultiply
+        level = steps.astype(np.intp)
+        pair = level[:, :3] << bits
+        pair |= level[:, 3:]
+        weighted = (table.astype(np.float32) / top)[pair]
+        sig = significant_bits(table).astype(np.uint8)[pair]
+        if lze == "fixed":
+            rgb_bits = 3 * np.maximum(np.maximum(sig[:, 0], sig[:, 1]), sig[:, 2]).astype(np.int64)
+        else:
+            rgb_bits = sig.sum(axis=1, dtype=np.int64)
     else:
         pm = premultiply(c.astype(np.int64), a.astype(np.int64), bits)
         weighted = pm.astype(np.float32) / top
@@ -132,20 +158,28 @@ def stored_colours(rgba: np.ndarray, bits: int, fragment_bits: int, lze: str) ->
 
 
 def weighted_image(trace, g, visible: np.ndarray, stored: np.ndarray, colours: StoredColours,
-                   base: np.ndarray, ties: str) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 2-4 image of the ``visible`` fragments over ``base``: ((H, W, 3) image, fragments in depth order).
+                   base: np.ndarray, ties: str, visible_by_arrival: np.ndarray | None = None,
+                   key_by_arrival: np.ndarray | None = None, row_by_arrival: np.ndarray | None = None,
+                   with_pixels: bool = False):
+    """Eq. 2-4 image of the ``visible`` fragments over ``base``: ((H, W, 3) image, fragments in depth order),
+    with ``with_pixels`` their pixel ids too.
 
     ``colours`` belong to the fragments ``stored`` (trace indices, a superset of the visible ones).
+    ``visible_by_arrival``, ``key_by_arrival`` and ``row_by_arrival``, when the caller has them, are
+    ``visible``, the depth keys and each stored fragment's row in ``colours`` in the order ``g.by_arrival``.
     """
-    at = np.empty(len(trace), np.int64)            # each stored fragment's row in ``colours``
-    at[stored] = np.arange(len(stored))
     # depth order: each pixel's visible fragments in arrival order, sorted in place (ties keep arrival)
-    in_arrival = visible[g.by_arrival]
+    in_arrival = visible[g.by_arrival] if visible_by_arrival is None else visible_by_arrival
     arrived, pix = g.by_arrival[in_arrival], g.pix_by_arrival[in_arrival]
-    key = g.key[arrived]
-    nearest_first = sort_within_runs(pix, key)
+    key = g.key[arrived] if key_by_arrival is None else key_by_arrival[in_arrival]
+    nearest_first = sort_short_runs(pix, key)
     order = arrived[nearest_first]
-    rows = at[order]
-    image = composite_weighted(pix, key[nearest_first], np.take(colours.weighted, rows, axis=0),
-                               colours.alpha[rows], base, ties)
-    return image.reshape(trace.height, trace.width, 3), order
+    if row_by_arrival is None:
+        at = np.empty(len(trace), np.int64)            # each stored fragment's row in ``colours``
+        at[stored] = np.arange(len(stored))
+        rows = at[order]
+    else:
+        rows = row_by_arrival[in_arrival][nearest_first]
+    image = composite_weighted(pix, key[nearest_first], colours.weighted, colours.alpha, base, ties, rows)
+    image = image.reshape(trace.height, trace.width, 3)
+    return (image, order, pix) if with_pixels else (image, order)   # the runs stay where they are: pix[order]
