@@ -76,7 +76,7 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, compare_exchange
-from gpusim.schemes.common.arrays import entry_index, pixel_key, smallest_per_pixel
+from gpusim.schemes.common.arrays import entry_index, pixel_key, smallest_per_pixel, sort_short_runs
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC, EntryFormat, access_layout,
@@ -141,7 +141,12 @@ class KBuffer(Scheme):
             plan.add(0, "store", "framebuffer", P, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES)
         shade = COMPOSITE + resolve_alu(fmt)                       # an entry's colour made and composited
-        composite = shade * (g.arrival >= k) if blend else 0       # a full buffer composites its nearest
+        if blend:                                                   # a full buffer composites its nearest
+            full = np.zeros(n, bool)
+            full[g.by_arrival[g.arrival_by_arrival >= k]] = True
+            composite = shade * full
+        else:
+            composite = 0
         add_rmw(plan, frag_pass, n, pix, P, k, fmt, cf, self.hw, framebuffer=blend, extra=composite)
         pixels = P
         plan.add(resolve, "load", "kbuffer", pixels, slots,
@@ -153,17 +158,18 @@ class KBuffer(Scheme):
 
         stats: dict[str, Stat] = {"batches": Stat(n_batches, "batches", "geometry batches (flushes + 1)")}
         if blend:
-            order = emit_order(pix, g.key, g.by_arrival, k)
+            order, order_pix, order_key = emit_order(pix, g.key, g.by_arrival, k, return_keys=True)
             kept_count = n
-            z = t.z[order].astype(np.float64)
-            same = pix[order][1:] == pix[order][:-1]
-            stats["misordered_pairs"] = Stat(int(np.count_nonzero(same & (np.diff(z) < 0))), "fragment pairs",
+            z = t.z[order]
+            same = order_pix[1:] == order_pix[:-1]
+            # z[i + 1] < z[i]: the float64 difference of two float32 depths has the sign of theirs
+            stats["misordered_pairs"] = Stat(int(np.count_nonzero(same & (z[1:] < z[:-1]))), "fragment pairs",
                                              "consecutively composited fragments in the wrong depth order")
-            stats["max_disorder"] = Stat(max_disorder(g.pix_by_depth, g.key_by_depth, pix[order], g.key[order]),
-                                         "positions", MAX_DISORDER_DOC)
+            stats["max_disorder"] = Stat(emitted_disorder(order_pix, order_key), "positions", MAX_DISORDER_DOC)
             used = int(np.minimum(g.count, k).sum())
         else:
             order = smallest_per_pixel(pix, g.key, k, order=g.by_depth)
+            order_pix = pix[order]
             kept_count = len(order)
             used = kept_count
         image_of = partial(entry_image, t, pix, entry=fmt, colour_format=cf,
@@ -175,10 +181,10 @@ class KBuffer(Scheme):
         extras = {}
         if self.hw != "blender":
             extras["rmw_replay"] = make_replay(pix, g.key, k, blend, image_of, order)
-        return SchemeResult(self.name, self.params(), image_of(order), n, g.covered, struct, plan, geometry_passes=1,
-                            dropped_fragments=int(dropped),
+        return SchemeResult(self.name, self.params(), image_of(order, order_pix=order_pix), n, g.covered, struct,
+                            plan, geometry_passes=1, dropped_fragments=int(dropped),
                             overflowed_pixels=0 if blend else int(np.count_nonzero(g.count > k)),
-                            lists=CapturedLists(pix[order], submission[order]), stats=stats,
+                            lists=CapturedLists(order_pix, submission[order]), stats=stats,
                             submission=submission, extras=extras)
 
 
@@ -210,6 +216,27 @@ def max_disorder(pix_sorted: np.ndarray, key_sorted: np.ndarray, pix_emitted: np
     lo = np.searchsorted(sorted_words, words, side="left").astype(np.int64)
     hi = np.searchsorted(sorted_words, words, side="right").astype(np.int64) - 1
     return int(np.maximum(np.maximum(lo - position, position - hi), 0).max())
+
+
+def emitted_disorder(pix_emitted: np.ndarray, key_emitted: np.ndarray) -> int:
+    """:func:`max_disorder` of fragments in the order they were composited (``pix_emitted`` grouped by pixel
+    ascending, ``key_emitted`` their depth keys), without the sorted sequence: each pixel's keys are sorted
+    in place (ties in composited order), so sorted position s holds composited position ``perm[s]``, whose
+    depth occupies the positions of its run of equal keys."""
+    n = len(pix_emitted)
+    if not n:
+        return 0
+    perm = sort_short_runs(pix_emitted, key_emitted)
+    key_sorted = key_emitted[perm]
+    new = np.empty(n, bool)
+    new[0] = True
+    np.not_equal(key_sorted[1:], key_sorted[:-1], out=new[1:])
+    new[1:] |= pix_emitted[1:] != pix_emitted[:-1]                      # the runs stay where they are
+    first = np.flatnonzero(new)
+    group = np.cumsum(new) - 1
+    lo = first[group]
+    hi = np.r_[first[1:], n][group] - 1
+    return int(np.maximum(np.maximum(lo - perm, perm - hi), 0).max())
 
 
 def entries_doc(entry: str, colour_format: str) -> str:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.common.arrays import lex_sorted
 
 _NONE = np.iinfo(np.int64).max
 
@@ -40,9 +39,11 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
     key_sorted = arrived_key.astype(np.int64)
     # queue entries: (key << 32 | position) so argmin = nearest, then earliest; _NONE = empty slot
     queue = np.full((len(start_c), capacity + 1), _NONE, np.int64)
-    emitted_pos = np.empty(n, np.int64)
-    emitted_step = np.empty(n, np.int64)
-    out = 0
+    # a pixel emits one entry per arrival once full, then drains: its sequence (grouped like ``by_arrival``)
+    # takes the entry pushed out by arrival j >= capacity at position j - capacity, the d-th drained at
+    # max(count - capacity, 0) + d; each goes straight to its place (no sort by pixel and step)
+    at = np.empty(n, np.int64)
+    steps = np.empty(n, np.int64) if return_steps else None
     for j, m in enumerate(active):
         pos = start_c[:m] + j
         entry = (key_sorted[pos] << 32) | pos          # position in by_arrival breaks ties by arrival
@@ -52,20 +53,20 @@ def emit_order(pix: np.ndarray, key: np.ndarray, by_arrival: np.ndarray, capacit
         queue[:m, capacity] = entry
         slot = np.argmin(queue[:m], axis=1)
         rows = np.arange(m)
-        emitted_pos[out:out + m] = queue[rows, slot] & 0xFFFFFFFF
-        emitted_step[out:out + m] = j
-        out += m
+        dest = start_c[:m] + (j - capacity)
+        at[dest] = queue[rows, slot] & 0xFFFFFFFF
+        if return_steps:
+            steps[dest] = j
         queue[rows, slot] = queue[:m, capacity]
     # drain: remaining entries nearest first
     rest = np.sort(queue[:, :capacity], axis=1)
     valid = rest != _NONE
-    rows = np.broadcast_to(np.arange(len(start_c))[:, None], rest.shape)[valid]
-    drained = rest[valid] & 0xFFFFFFFF
-    m_rest = len(drained)
-    emitted_pos[out:out + m_rest] = drained
-    emitted_step[out:out + m_rest] = count_c[rows] + np.broadcast_to(np.arange(capacity), rest.shape)[valid]
-    order, emitted_pix = lex_sorted(pix_sorted[emitted_pos], emitted_step)
-    at = emitted_pos[order]
-    out = (by_arrival[at],) + ((emitted_step[order],) if return_steps else ()) + \
+    first = start_c + np.maximum(count_c - capacity, 0)
+    dest = (first[:, None] + np.arange(capacity))[valid]
+    at[dest] = rest[valid] & 0xFFFFFFFF
+    if return_steps:
+        steps[dest] = (count_c[:, None] + np.arange(capacity))[valid]
+    emitted_pix = pix_sorted
+    out = (by_arrival[at],) + ((steps,) if return_steps else ()) + \
         ((emitted_pix, arrived_key[at]) if return_keys else ())
     return out if len(out) > 1 else out[0]

@@ -108,16 +108,17 @@ def resolve_alu(entry: str) -> int:
 
 
 def entry_image(trace, pix: np.ndarray, order: np.ndarray, entry: str, colour_format: str,
-                uniform_alpha: float) -> np.ndarray:
+                uniform_alpha: float, order_pix: np.ndarray | None = None) -> np.ndarray:
     """Image of fragments ``order`` (grouped by pixel, in compositing order) as entries of format ``entry``
     hold them: ``depth-colour`` their colour in ``colour_format`` (opaque ones at alpha 1); ``rgbz`` their
-    float32 R, G, B at ``uniform_alpha``; ``z`` the grey 1 - z of their depth at ``uniform_alpha``."""
+    float32 R, G, B at ``uniform_alpha``; ``z`` the grey 1 - z of their depth at ``uniform_alpha``.
+    ``order_pix`` is ``pix[order]`` when the caller has it."""
     if entry == "depth-colour":
-        return composite_stored(trace, pix, order, colour_format)
+        return composite_stored(trace, pix, order, colour_format, order_pix)
     if entry == "rgbz":
         rgb = np.take(trace.rgba[:, :3], order, axis=0).astype(np.float32)
     else:
         grey = np.clip(np.float32(1.0) - np.take(trace.z, order).astype(np.float32), 0, 1)
         rgb = np.repeat(grey[:, None], 3, axis=1)
     alpha = np.full(len(order), uniform_alpha, np.float32)
-    return composite_image(trace, pix[order], np.c_[rgb, alpha], alpha)
+    return composite_image(trace, pix[order] if order_pix is None else order_pix, np.c_[rgb, alpha], alpha)
