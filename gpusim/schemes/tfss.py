@@ -165,6 +165,8 @@ class TFSS(Scheme):
 
         # read (Figure 3-9), one thread per pixel
         rpix, rstart, rcount = read_runs(pix, read_order, P, stored_pix[read])
+        read_per_pixel = np.zeros(P, np.int64)
+        read_per_pixel[rpix] = rcount
         if self.read_scan == "all":
             plan.add(2, "load", "ssa_table", P, 1, lambda i, s: i * SA, SA)
         else:
@@ -188,7 +190,7 @@ class TFSS(Scheme):
                                                  ez.visible_by_arrival & kept_by_arrival, ez.key_by_arrival,
                                                  np.cumsum(in_stored) - 1, with_pixels=True)
 
-        stored_bits = int(frag_bits[kept].sum())
+        stored_bits = int(col.bits[read].sum())
         struct = [
             *pipeline_buffers(P, fb_bytes, bits, ez, blended > 0),
             Structure("ssa_table", SA, P, len(first), "start-section address per pixel (S_A x W x H)"),
@@ -221,4 +223,4 @@ class TFSS(Scheme):
             self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
             dropped_fragments=len(unfit), overflowed_pixels=int(len(np.unique(pix[unfit]))),
             lists=CapturedLists(order_pix, order), stats=stats,
-            extras={"read_per_pixel": np.bincount(pix[kept], minlength=P)})
+            extras={"read_per_pixel": read_per_pixel})
