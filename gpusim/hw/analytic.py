@@ -275,15 +275,19 @@ VOLUME_BOUNDS = ("issue", "raster", "dram", "atomic")   # bounds that grow with 
 
 
 def _pass_packing(plan, groups: list[int], placement, p: int, work, gpu) -> _Packing:
-    """Consecutive lanes, or the scoreboard dispatch's packing when a group of the pass goes through it."""
+    """Consecutive lanes, or the scoreboard dispatch's packing when a group of the pass goes through it: of every
+    lane of the pass, as gpusim.hw.lower packs them (a multi-pass k-buffer's peel test runs on fragments that do
+    not reach the scoreboard)."""
+    if not any(plan.groups[gi].op == "scoreboard" for gi in groups):
+        return _Packing(gpu.core.warp_size)
+    lanes = []
     for gi in groups:
-        g = plan.groups[gi]
-        if g.op == "scoreboard":
-            sel = placement[gi][2][p]
-            sel = sel() if isinstance(sel, _StillIssuing) else sel
-            keys = np.unique(g.thread_ids() if sel is None else g.thread_ids()[placement[gi][0][sel]])
-            return _Packing(gpu.core.warp_size, keys, scoreboard_warps(work.frag_pixel[keys], work.width, gpu))
-    return _Packing(gpu.core.warp_size)
+        sel = placement[gi][2][p]
+        sel = sel() if isinstance(sel, _StillIssuing) else sel
+        threads = plan.groups[gi].thread_ids()
+        lanes.append(threads if sel is None else threads[placement[gi][0][sel]])
+    keys = np.unique(np.concatenate(lanes))
+    return _Packing(gpu.core.warp_size, keys, scoreboard_warps(work.frag_pixel[keys], work.width, gpu))
 
 
 def _scoreboard_bound(held: list, keys: np.ndarray, wchain: np.ndarray, packing: "_Packing",
