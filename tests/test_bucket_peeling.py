@@ -175,6 +175,29 @@ def test_multipass_kbuffer_is_exact_and_peels_k_layers_a_pass(deep, k):
     assert res.accesses["peel_depth"].get("load", 0) == len(deep) * (res.geometry_passes - 1)
 
 
+def test_multipass_kbuffer_plan_grows_with_fragments_plus_passes():
+    """A pixel 2,000 layers deep takes 250 passes of k = 8, every fragment in all of them up to its own: 125,000
+    fragment-passes of RMW, held as one group per op across the passes (each fragment once), not a group per
+    pass of every fragment still behind the peel depth."""
+    rng = np.random.default_rng(3)
+    t = one_pixel(rng.permutation(np.linspace(0.001, 0.999, 2000)).astype(np.float32))
+    res = run("multipass-kbuffer", t, k=8)
+    assert res.geometry_passes == 250 and res.dropped_fragments == 0
+    assert res.accesses["kbuffer"]["rmw_read"] == 8 * sum(2000 - 8 * p for p in range(250))
+    held = sum(len(g.thread) for g in res.plan.groups)
+    assert held <= 20 * 2000 + 10 * res.geometry_passes, held
+
+
+def test_multipass_kbuffer_behind_the_scoreboard_times_at_every_level(deep):
+    """The analytic level packs the scoreboard's warps from every lane of a peel pass, as dispatch does (the peel
+    test runs on fragments that do not reach the scoreboard); it failed with an IndexError before."""
+    res = run("multipass-kbuffer", deep, k=3, hw="scoreboard")
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    from gpusim.replay import run_timing
+    cycles = {level: run_timing(res, deep, level, gpu, None)[0]["cycles"] for level in ("analytic", "full")}
+    assert 0.5 * cycles["full"] <= cycles["analytic"] <= 2 * cycles["full"], cycles
+
+
 def test_multipass_kbuffer_with_one_entry_is_depth_peeling():
     t = one_pixel([0.3, 0.1, 0.3, 0.2, 0.3])
     mp, dp = run("multipass-kbuffer", t, k=1, colour_format="rgba8"), run("depth-peeling", t)

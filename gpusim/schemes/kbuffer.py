@@ -247,7 +247,7 @@ def entries_doc(entry: str, colour_format: str) -> str:
 
 
 def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count: int, k: int, entry: str,
-            colour_format: str, hw: str, framebuffer: bool = False, extra=0) -> None:
+            colour_format: str, hw: str, framebuffer: bool = False, extra=0, count=1, seq_pass=None) -> None:
     """Add each fragment thread's read-modify-write of its pixel's ``k`` entries (section 3.2) to pass
     ``pass_index`` of ``plan``.
 
@@ -256,21 +256,38 @@ def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count
     texels with ``entry = z``), the insertion into the k sorted entries (plus ``extra`` instructions per
     thread), as many ``rmw_write`` s, behind a ``scoreboard`` dispatch with ``scoreboard``; or one
     ``program_blend`` with ``blender``. ``framebuffer``: sort-and-blend's RGBA32F target is read and written too.
+    ``count`` and ``seq_pass``: thread ``i`` repeats its RMW in passes ``seq_pass[0 .. count[i] - 1]`` (the
+    multi-pass k-buffer's peels), one group per entry texel, so the plan holds each thread once however many
+    passes it takes part in.
     """
     slots, slot_bytes = access_layout(entry, colour_format, k)
     at = lambda i, s: entry_index(pix[i], s, slots, pixel_count, "layer-major") * slot_bytes  # noqa: E731  (MRT planes)
+
+    def entries(op: str, dep: bool) -> None:
+        """``op`` on each of the pixel's entry texels: ``slots`` ops a thread, or a group per texel across passes."""
+        if seq_pass is None:
+            plan.add(pass_index, op, "kbuffer", threads, slots, at, slot_bytes, dep=dep)
+            return
+        for texel in range(slots):
+            plan.add(pass_index, op, "kbuffer", threads, count, lambda i, s, t=texel: at(i, t), slot_bytes, dep=dep,
+                     seq_pass=seq_pass)
+
     if hw == "blender":
         program_bytes = slots * slot_bytes + (FRAMEBUFFER_BYTES if framebuffer else 0)
-        plan.add(pass_index, "program_blend", "kbuffer", threads, 1, lambda i, s: pix[i] * slot_bytes, program_bytes)
+        plan.add(pass_index, "program_blend", "kbuffer", threads, count, lambda i, s: pix[i] * slot_bytes,
+                 program_bytes, seq_pass=seq_pass)
         return
     if hw == "scoreboard":
-        plan.add(pass_index, "scoreboard", "kbuffer", threads, 1, lambda i, s: pix[i] * slot_bytes, 0)
-    plan.add(pass_index, "rmw_read", "kbuffer", threads, slots, at, slot_bytes, dep=hw == "scoreboard")
+        plan.add(pass_index, "scoreboard", "kbuffer", threads, count, lambda i, s: pix[i] * slot_bytes, 0,
+                 seq_pass=seq_pass)
+    entries("rmw_read", hw == "scoreboard")
     fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
     if framebuffer:
-        plan.add(pass_index, "rmw_read", "framebuffer", threads, 1, fb, FRAMEBUFFER_BYTES)
+        plan.add(pass_index, "rmw_read", "framebuffer", threads, count, fb, FRAMEBUFFER_BYTES, seq_pass=seq_pass)
     # modify: insert into the k sorted entries (a compare-exchange of the depth and what the entry holds beside it)
-    plan.compute(pass_index, threads, k * compare_exchange(payload_bytes(entry, colour_format)) + extra)
-    plan.add(pass_index, "rmw_write", "kbuffer", threads, slots, at, slot_bytes, dep=True)
+    plan.compute(pass_index, threads, k * compare_exchange(payload_bytes(entry, colour_format)) + extra,
+                 count=count, seq_pass=seq_pass)
+    entries("rmw_write", True)
     if framebuffer:
-        plan.add(pass_index, "rmw_write", "framebuffer", threads, 1, fb, FRAMEBUFFER_BYTES, dep=True)
+        plan.add(pass_index, "rmw_write", "framebuffer", threads, count, fb, FRAMEBUFFER_BYTES, dep=True,
+                 seq_pass=seq_pass)

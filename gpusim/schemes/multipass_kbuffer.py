@@ -42,7 +42,7 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, PEEL_TEST
-from gpusim.schemes.common.arrays import entry_index, lex_order, rank_in_runs
+from gpusim.schemes.common.arrays import entry_index, lex_order
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC, EntryFormat, access_layout,
                                                    check_entry, entry_bytes, entry_image, per_access, resolve_alpha,
@@ -53,23 +53,32 @@ from gpusim.schemes.kbuffer import FRAMEBUFFER_BYTES, add_rmw, entries_doc
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
 
-def peel_in_passes(pix: np.ndarray, key: np.ndarray, by_depth: np.ndarray, k: int, pixel_count: int) -> list[tuple]:
-    """Each pass's (fragments that pass the peel test, fragments kept), both grouped by pixel, nearest first:
-    a pass keeps the k nearest of its pixel's fragments strictly behind the farthest the previous pass kept
-    (``by_depth``: every fragment grouped by pixel, nearest first, equal depths in submission order)."""
-    out = []
-    alive = by_depth
-    end = np.full(pixel_count, -1, np.int64)   # the depth key each pixel's last pass ended at
-    while len(alive):
-        keep = rank_in_runs(pix[alive]) < k
-        kept = alive[keep]
-        out.append((alive, kept))
-        pk = pix[kept]
-        last = kept[np.r_[pk[1:] != pk[:-1], True]]
-        end[pix[last]] = key[last]
-        rest = alive[~keep]
-        alive = rest[key[rest].astype(np.int64) > end[pix[rest]]]
-    return out
+def peel_in_passes(pix_sorted: np.ndarray, key_sorted: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The pass each fragment is captured or lost in, and whether it is captured, for fragments grouped by pixel
+    nearest first (``pix_sorted``, ``key_sorted``: equal depths in submission order). A pass keeps the k nearest
+    of its pixel's fragments strictly behind the depth the previous pass ended at; the rest of the depth it ends
+    at are lost. A fragment takes part (passes the peel test) in every pass up to its own.
+
+    A pass moves each pixel's start to the first fragment behind its end: a step per pixel still peeling, so the
+    work grows with the fragments plus the pixels' passes, not with their product (stress-layers: 4,097 layers
+    on a pixel)."""
+    n = len(pix_sorted)
+    new_pixel = np.r_[True, pix_sorted[1:] != pix_sorted[:-1]] if n else np.zeros(0, bool)
+    boundary = new_pixel.copy()                    # the first fragment of each pass of each pixel
+    packed = (pix_sorted.astype(np.uint64) << np.uint64(32)) | key_sorted.astype(np.uint64)
+    begin = np.flatnonzero(new_pixel)
+    end = np.r_[begin[1:], n]
+    while len(begin):
+        last = np.minimum(begin + k, end) - 1                      # the pass's farthest kept fragment
+        begin = np.searchsorted(packed, packed[last], side="right")    # the first strictly behind it
+        more = begin < end
+        begin, end = begin[more], end[more]
+        boundary[begin] = True
+    index = np.arange(n)
+    first = np.maximum.accumulate(np.where(boundary, index, 0))            # the first of each fragment's pass
+    passes = np.cumsum(boundary) - 1                                        # passes counted over every pixel
+    passes -= passes[np.maximum.accumulate(np.where(new_pixel, index, 0))]  # ... from the pixel's first
+    return passes, index - first < k
 
 
 @register("multipass-kbuffer")
@@ -97,8 +106,9 @@ class MultipassKBuffer(Scheme):
         n, P, k, pix = len(trace), trace.pixel_count, self.k, g.pix
         fmt, cf = self.entry, self.colour_format
         slots, slot_bytes = access_layout(fmt, cf, k)      # k entries, or ceil(k / 4) texels of Z-only entries
-        peels = peel_in_passes(pix, g.key, g.by_depth, k, P)
-        m = len(peels)
+        by_depth = g.by_depth
+        pass_sorted, kept_sorted = peel_in_passes(g.pix_by_depth, g.key_by_depth, k)
+        m = int(pass_sorted.max()) + 1 if n else 0
         total = m + (1 if self.termination == "occlusion-query" and n else 0)
 
         passes, peel_at, resolve_at = [Pass("clear", "clear", "entry")], [], []
@@ -118,15 +128,20 @@ class MultipassKBuffer(Scheme):
         plan.add(0, "load", "peel_depth", n, total - 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES,
                  seq_pass=later)
         plan.compute(0, n, PEEL_TEST, count=max(total - 1, 0), seq_pass=later)
-        for p, (alive, kept) in enumerate(peels):
-            threads = np.sort(alive)
-            add_rmw(plan, peel_at[p], threads, pix[threads], P, k, fmt, cf, self.hw)
-            # the pixels with entries (kept is grouped by pixel): read, composite, blend in, keep the peel depth,
-            # empty the entries
-            pk = pix[kept]
-            first = np.r_[True, pk[1:] != pk[:-1]] if len(kept) else np.zeros(0, bool)
+        # each fragment's RMW in every peel pass up to the one that captures or loses it: one group across passes
+        takes_part = np.empty(n, np.int64)
+        takes_part[by_depth] = pass_sorted + 1
+        add_rmw(plan, peel_at[0], n, pix, P, k, fmt, cf, self.hw, count=takes_part,
+                seq_pass=np.asarray(peel_at[:m], np.int64))
+        # the pixels with entries, pass by pass: read, composite, blend in, keep the peel depth, empty the entries
+        captured = np.flatnonzero(kept_sorted)                              # positions in depth order
+        by_pass = captured[lex_order(pass_sorted[captured])]                # pass by pass, each grouped by pixel
+        cuts = np.searchsorted(pass_sorted[by_pass], np.arange(m + 1))
+        for p in range(m):
+            pk = g.pix_by_depth[by_pass[cuts[p]:cuts[p + 1]]]
+            first = np.r_[True, pk[1:] != pk[:-1]] if len(pk) else np.zeros(0, bool)
             done = pk[first]
-            stored = np.diff(np.r_[np.flatnonzero(first), len(kept)])
+            stored = np.diff(np.r_[np.flatnonzero(first), len(pk)])
             r = resolve_at[p]
             slot = lambda i, s, d=done: entry_index(d[i], s, slots, P, "layer-major") * slot_bytes  # noqa: E731
             plan.add(r, "load", "kbuffer", done, slots, slot, slot_bytes)
@@ -136,9 +151,7 @@ class MultipassKBuffer(Scheme):
             plan.add(r, "store", "peel_depth", done, 1, lambda i, s, d=done: d[i] * DEPTH_BYTES, DEPTH_BYTES)
             plan.add(r, "store", "kbuffer", done, slots, slot, slot_bytes)
 
-        kept_all = np.concatenate([kept for _, kept in peels]) if peels else np.zeros(0, np.int64)
-        rank = np.repeat(np.arange(m), [len(kept) for _, kept in peels])
-        order = kept_all[lex_order(pix[kept_all], rank)]        # pass by pass, each nearest first: depth order
+        order = by_depth[captured]               # pass by pass, each nearest first: depth order
         lost = n - len(order)
         kept_n = np.bincount(pix[order], minlength=P)
         struct = [Structure("kbuffer", entry_bytes(fmt, cf), P * slots * per_access(fmt), int(kept_n.clip(max=k).sum()),
