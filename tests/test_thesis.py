@@ -245,3 +245,15 @@ def test_histogram_scene_rejects_impossible_counts():
         load_scene("thesis-frame60", ["transparent_per_pixel=[400000]"])
     with pytest.raises(ConfigError, match="fewer than the transparent fragments"):
         load_scene("thesis-frame60", ["fragments=1000"])
+
+
+@pytest.mark.parametrize("scheme", ["tfss", "weight-factor", "r-buffer"])
+def test_the_pipeline_buffers_count_only_pixels_they_hold(scheme):
+    """The z-buffer holds a depth only where an opaque fragment was written: a pixel of transparent fragments
+    alone uses no z-buffer entry (it once counted as holding one), and the frame buffer holds the pixels with
+    an opaque or a blended fragment."""
+    t = make_trace([0, 0, 1, 1, 2], [0] * 5, [0.5, 0.6, 0.4, 0.7, 0.3], opaque=[False, False, True, False, False],
+                   width=4, height=1)
+    used = make_scheme(scheme).run(t).footprint_used
+    assert used["z_buffer"] == 4                                     # pixel 1's opaque depth only
+    assert used["framebuffer"] <= 3 * make_scheme(scheme).run(t).footprint["framebuffer"] // 4

@@ -98,7 +98,8 @@ def early_z(trace, g: PixelGroups, plan: OpPlan, pass_index: int, framebuffer_by
         plan.add(pass_index, "depth_test", "z_buffer", g.n, 1, lambda i, s: pix[i] * DEPTH_BYTES, DEPTH_BYTES)
     plan.add(pass_index, "store", "framebuffer", writes, 1,
              lambda i, s: pix[writes[i]] * framebuffer_bytes, framebuffer_bytes, dep=True)
-    return EarlyZ(stored, visible, opaque_rgb, final != _FAR, uses_z,
+    # a pixel's running minimum stays at 0xFFFFFFFF (above every key) when none of its fragments is opaque
+    return EarlyZ(stored, visible, opaque_rgb, final < np.uint64(0xFFFFFFFF), uses_z,
                   culled_at_arrival=int(np.count_nonzero(~is_opaque & ~passes)),
                   occluded_after_store=int(np.count_nonzero(stored_sorted & ~visible_sorted)),
                   stored_by_arrival=stored_sorted, visible_by_arrival=visible_sorted, key_by_arrival=key)
