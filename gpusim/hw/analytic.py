@@ -248,18 +248,27 @@ class _Aranges:
         return self.whole[:n] if n <= len(self.whole) else np.arange(n, dtype=np.int64)
 
 
-def _group_passes(g, arange=np.arange):
+def _group_passes(g, arange=np.arange, counted: dict | None = None):
     """Where group ``g``'s operations fall: (lane index into ``g.thread``, ops, {pass: selection}) with the
     selection of each pass's lanes into the first two (None: all of them; a :class:`_StillIssuing` for a
-    ``seq_pass`` group whose threads issue different numbers of ops)."""
+    ``seq_pass`` group whose threads issue different numbers of ops). ``counted`` keeps each count array's
+    (least, most, threads with more than s ops): the groups of one thread set across passes share theirs."""
     n = len(g.thread)
     if g.seq_pass is not None:          # op s of every thread in pass seq_pass[s]
         count = g.count
-        if int(count.min()) == int(count.max()):
-            where = {int(g.seq_pass[s]): None for s in range(int(count.max()))}
+        key = (count.__array_interface__["data"][0], count.shape, count.strides)
+        got = counted.get(key) if counted is not None else None
+        if got is None:
+            least, top = int(count.min()), int(count.max())
+            sizes = None if least == top else \
+                len(count) - np.cumsum(np.bincount(count, minlength=top + 1))[:top]   # no sort
+            got = (least, top, sizes)
+            if counted is not None:
+                counted[key] = got
+        least, top, sizes = got
+        if sizes is None:
+            where = {int(g.seq_pass[s]): None for s in range(top)}
         else:
-            top = int(count.max())
-            sizes = len(count) - np.cumsum(np.bincount(count, minlength=top + 1))[:top]   # no sort
             where = {int(g.seq_pass[s]): _StillIssuing(count, sizes, s) for s in range(top)}
         return arange(n), np.broadcast_to(np.ones(1, np.int64), (n,)), where
     if g.pass_fn is not None:
@@ -464,7 +473,8 @@ def analytic_timing(result, work, gpu) -> dict:
     used: list[set] = [set() for _ in range(n_pass)]
     # where each group's operations fall: per pass, the threads (None: all) issuing them
     aranges = _Aranges(max((len(g.thread) for g in plan.groups), default=0))
-    placement = [_group_passes(g, aranges) for g in plan.groups]
+    counted: dict = {}
+    placement = [_group_passes(g, aranges, counted) for g in plan.groups]
     ids = _thread_ids(plan, aranges)
     groups_of_pass: list[list[int]] = [[] for _ in range(n_pass)]
     for gi, (_, _, where) in enumerate(placement):
