@@ -1,6 +1,6 @@
 """Scale: the stress scenes and a 20M-fragment frame through every scheme and fidelity level.
 
-    .venv/bin/python benchmarks/bench_scale.py                     # both parts (about an hour on 2 cores)
+    .venv/bin/python benchmarks/bench_scale.py                     # both parts (about 25 minutes on 2 cores)
     .venv/bin/python benchmarks/bench_scale.py --part stress --scheme kbuffer --level analytic
     .venv/bin/python benchmarks/bench_scale.py --part big --no-full
 
