@@ -36,6 +36,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from gpusim.jit import njit, numba_usable
+
+
 SUBPIXEL_BITS = 8
 ONE = 1 << SUBPIXEL_BITS        # one pixel in fixed point
 HALF = ONE // 2                 # pixel-centre offset
@@ -260,21 +263,9 @@ def numpy_path() -> Iterator[None]:
 
 
 def _compile() -> SimpleNamespace | None:
-    try:
-        import numba
-    except ImportError:
+    if not numba_usable():
         return None
-    if numba.config.DISABLE_JIT:
-        return None
-
-    def jit(func):
-        # the IEEE error model: a division by zero gives inf or nan, as numpy's does
-        options = {"error_model": "numpy", "nogil": True}
-        func = getattr(func, "py_func", func)      # compiled before (a test reset _COMPILED)
-        try:
-            return numba.njit(cache=True, **options)(func)
-        except RuntimeError:     # "cannot cache function ...: no locator available"
-            return numba.njit(**options)(func)
+    jit = njit
 
     global _snap, _window_depth, _doubled_area, _pixel_range, _edge, _gradients, _plane, _clip01, _spans
     _snap, _window_depth, _doubled_area, _pixel_range, _edge, _gradients, _plane = (
