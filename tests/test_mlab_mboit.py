@@ -153,6 +153,24 @@ def test_mlab_equals_a_per_pixel_reimplementation(layers, fmt):
         assert_close(res.image, mlab_reference(trace, layers, fmt), 1e-6, f"mlab {layers} {fmt}")
 
 
+@pytest.mark.parametrize("layers, fmt", [(2, "rgba8"), (4, "rgba8"), (4, "rgba32f"), (1, "rgba8")])
+def test_mlab_compiled_and_numpy_paths_agree_bit_for_bit(monkeypatch, layers, fmt):
+    """The fragments past a pixel's first layers run in a numba kernel where numba is, else rank by rank in
+    numpy: the same images and merge counts exactly (the kernel's float32 operations are numpy's, unfused)."""
+    from gpusim.jit import numba_usable
+    from gpusim.schemes import mlab
+    if not numba_usable():
+        pytest.skip("numba is not installed: only the numpy path exists")
+    traces = (random_trace(3000, 6, seed=layers), STIFF["1,000 layers"](), STIFF["300 layers of alpha 0.99"]())
+    compiled = [run("mlab", t, layers=layers, colour_format=fmt) for t in traces]
+    assert mlab._KERNEL and mlab._KERNEL[0] is not None
+    monkeypatch.setattr(mlab, "_KERNEL", [None])
+    for trace, got in zip(traces, compiled):
+        want = run("mlab", trace, layers=layers, colour_format=fmt)
+        assert np.array_equal(got.image, want.image)
+        assert got.stats["merges"].value == want.stats["merges"].value > 0
+
+
 def test_mlab_discards_alpha_0_and_orders_its_rmw_in_both_hardware_modes():
     t = random_trace(500, 4, seed=3)
     rgba = t.rgba.copy()

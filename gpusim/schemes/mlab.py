@@ -23,6 +23,11 @@ as a rasterizer-ordered view on the SM (Intel's PixelSync, the paper's platform)
 (the ``scoreboard`` operation holds a fragment while another of its pixel is in flight), then ``layers``
 reads, the insertion and merge on the SM, and ``layers`` writes.
 
+The functional model places each pixel's first ``layers`` fragments with one sort (they never merge) and runs
+every later one's insertion and merge in a compiled kernel (gpusim.jit) where numba is installed, else rank
+by rank over the pixels in numpy (and always for ``rgba16f``: numba has no float16): the same results bit for
+bit.
+
 ALU work (gpusim.schemes.common.alu): the fragment's premultiplied outputs (``MLAB_FRAGMENT``); with
 ``rov`` also the insertion (``layers`` compare-exchanges of an entry) and the merge (``MLAB_MERGE``) on the
 SM; the resolve composites the occupied entries (``COMPOSITE`` each).
@@ -36,6 +41,7 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
+from gpusim.jit import njit
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, MLAB_FRAGMENT, MLAB_MERGE, compare_exchange
@@ -71,6 +77,61 @@ def insert_and_merge(keys: np.ndarray, values: np.ndarray, key: np.ndarray, valu
     mix[:, 3] = rnd(near[:, 3] * far[:, 3])
     ext_v[:, L - 1] = np.where(merged[:, None], mix, near)
     return ext_k[:, :L], ext_v[:, :L], merged
+
+
+def _later_fragments(keys, vals, merges, covered, start, length, key, value, L, unorm8):
+    """:func:`insert_and_merge` for every fragment past each pixel's first ``L``, pixel by pixel in arrival order
+    (compiled with numba; pixels are independent, so the order across them changes nothing). ``unorm8``: round
+    merged values to RGBA8 as :func:`~gpusim.schemes.common.storage.rounder` does, else keep float32."""
+    zero, one, scale = np.float32(0.0), np.float32(1.0), np.float32(255.0)
+    ext_k = np.empty(L + 1, np.float64)
+    ext_v = np.empty((L + 1, 4), np.float32)
+    for r in range(len(covered)):
+        if length[r] <= L:
+            break                                    # runs longest first
+        p = covered[r]
+        for j in range(L, length[r]):
+            i = start[r] + j
+            pos = 0
+            for s in range(L):
+                if keys[p, s] <= key[i]:
+                    pos += 1
+            for s in range(L + 1):
+                if s < pos:
+                    src = s
+                elif s == pos:
+                    src = -1
+                else:
+                    src = s - 1
+                if src < 0:
+                    ext_k[s] = key[i]
+                    for c in range(4):
+                        ext_v[s, c] = value[i, c]
+                else:
+                    ext_k[s] = keys[p, src]
+                    for c in range(4):
+                        ext_v[s, c] = vals[p, src, c]
+            if ext_k[L] != EMPTY:                    # L + 1 entries: the two farthest merge
+                for c in range(4):
+                    mixed = ext_v[L - 1, c] * ext_v[L, 3] if c == 3 else \
+                        ext_v[L - 1, c] + ext_v[L, c] * ext_v[L - 1, 3]
+                    if unorm8:
+                        mixed = np.rint(min(max(mixed, zero), one) * scale) / scale
+                    ext_v[L - 1, c] = mixed
+                merges[p] += 1
+            for s in range(L):
+                keys[p, s] = ext_k[s]
+                for c in range(4):
+                    vals[p, s, c] = ext_v[s, c]
+
+
+_KERNEL: list = []     # [the compiled _later_fragments, or None], made on first use
+
+
+def _compiled_later_fragments():
+    if not _KERNEL:
+        _KERNEL.append(njit(_later_fragments))
+    return _KERNEL[0]
 
 
 def resolve_layers(values: np.ndarray, background: np.ndarray) -> np.ndarray:
@@ -144,10 +205,14 @@ class MultiLayerAlphaBlending(Scheme):
             keys.reshape(-1)[at] = key[first]
             put_rows(vals.reshape(P * L, 4), at, take_rows(value, first))
             # every later fragment is one insertion and merge, in arrival order (rank by rank over the pixels)
-            start, _, active = runs_by_length(pix_sorted)
+            start, length, active = runs_by_length(pix_sorted)
             covered = pix_sorted[start]
+            # compiled where numba is (not for rgba16f: numba has no float16), else rank by rank in numpy
+            kernel = _compiled_later_fragments() if self.colour_format != "rgba16f" else None
+            if kernel is not None:
+                kernel(keys, vals, merges, covered, start, length, key, value, L, self.colour_format == "rgba8")
             flat = vals.reshape(P, L * 4)
-            for j in range(L, len(active)):
+            for j in range(L, len(active) if kernel is None else L):
                 rows, i = covered[:active[j]], start[:active[j]] + j
                 k, v, merged = insert_and_merge(take_rows(keys, rows), take_rows(flat, rows).reshape(-1, L, 4),
                                                 key[i], take_rows(value, i), rnd)
