@@ -171,6 +171,20 @@ def test_mlab_compiled_and_numpy_paths_agree_bit_for_bit(monkeypatch, layers, fm
         assert got.stats["merges"].value == want.stats["merges"].value > 0
 
 
+@pytest.mark.parametrize("moments", ["power4", "power6", "trig4"])
+def test_mboit_transmittance_is_the_same_per_rank_or_gathered(monkeypatch, moments):
+    """Large ranks' transmittances are computed a rank's block at a time, small ones together with their pixels'
+    factors gathered: either way the same float32 operations per fragment, the same image and counts."""
+    from gpusim.schemes import mboit
+    traces = (random_trace(3000, 6, seed=1), STIFF["1,000 layers"](), STIFF["300 layers of alpha 0.99"]())
+    got = {}
+    for small in (0, 10**9):                 # every rank a block of its own; every rank gathered
+        monkeypatch.setattr(mboit, "SMALL_BLOCK", small)
+        got[small] = [run("mboit", t, moments=moments) for t in traces]
+    for a, b in zip(got[0], got[10**9]):
+        assert np.array_equal(a.image, b.image) and a.stats == b.stats
+
+
 def test_mlab_discards_alpha_0_and_orders_its_rmw_in_both_hardware_modes():
     t = random_trace(500, 4, seed=3)
     rgba = t.rgba.copy()

@@ -53,7 +53,8 @@ from gpusim.schemes.common.alu import MBOIT_GENERATE, MBOIT_RESOLVE, PREMULTIPLY
 from gpusim.metrics.composite import run_starts
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.arrays import lex_order, put_rows
-from gpusim.schemes.common.moments import CONFIGS, absorbance, factor, moment_terms, transmittance_rows, warp_depth
+from gpusim.schemes.common.moments import (BATCH, CONFIGS, absorbance, factor, moment_terms, transmittance_rows,
+                                           warp_depth)
 from gpusim.schemes.common.storage import COLOUR_BYTES, effective_alpha, rounder
 from gpusim.schemes.result import SchemeResult, Stat, Structure
 
@@ -68,6 +69,9 @@ BIAS = {"half": 5e-3, "half-all": 5e-3, "single": 5e-6}
 def target_channels(reals: int) -> list[int]:
     """Channels of each render target holding ``reals`` moment values (RGBA targets, the last RG or R)."""
     return [min(4, reals - at) for at in range(0, reals, 4)]
+
+
+SMALL_BLOCK = 4096    # pixels: ranks with fewer have their transmittances computed together, rows gathered
 
 
 class RankMajor:
@@ -100,6 +104,11 @@ class RankMajor:
     def blocks(self):
         """(first rank-major position, pixels) of each rank's block."""
         return [(at, m) for at, _, m in self._blocks()]
+
+    def rows(self) -> np.ndarray:
+        """The pixel row of each rank-major position (its place in its rank's block)."""
+        n = int(self.active.sum())
+        return np.arange(n) - np.repeat(np.cumsum(self.active) - self.active, self.active)
 
     def fold(self, rows: np.ndarray, values: np.ndarray, step) -> np.ndarray:
         """``rows`` (pixels, ...) updated by ``rows[:m] = step(rows[:m], block)`` for each rank's block of
@@ -198,14 +207,31 @@ class MomentBasedOIT(Scheme):
         L, D = factor(b0 if all_lit else b0[lit], rows[:, 1:] if all_lit else rows[lit, 1:], ms, bias)
         if not all_lit:
             L, D = _scatter_rows(L, lit), _scatter_rows(D, lit)
+        # each fragment's transmittance from its pixel's factors: a rank's block on the first rows of L and D
+        # while blocks are large, then the small blocks' fragments together with their rows gathered (a pixel
+        # 4,097 deep is 4,097 ranks: a call each would cost more than their work)
         T = np.empty(len(frag), np.float32)
         invalid = 0
-        for at, m in ranks.blocks():
-            t, bad = transmittance_rows(L[:m], D[:m], b0[:m], zw[at:at + m], ms, self.overestimation)
+
+        def put(at, stop, rows, L_, D_, b0_):
+            nonlocal invalid
+            t, bad = transmittance_rows(L_, D_, b0_, zw[at:stop], ms, self.overestimation)
             if not all_lit:
-                t[~lit[:m]], bad[~lit[:m]] = 1, False
-            T[at:at + m] = t
+                dark = ~lit[rows]
+                t[dark], bad[dark] = 1, False
+            T[at:stop] = t
             invalid += int(np.count_nonzero(bad))
+
+        small = len(frag)
+        for at, m in ranks.blocks():
+            if m < SMALL_BLOCK:
+                small = at
+                break
+            put(at, at + m, slice(0, m), L[:m], D[:m], b0[:m])
+        row_of = ranks.rows()
+        for lo in range(small, len(frag), BATCH):
+            row = row_of[lo:lo + BATCH]
+            put(lo, lo + len(row), row, L[row], D[row], b0[row])
         weight = T * alpha
         out = np.empty((len(frag), 4), np.float32)
         out[:, :3] = rgba[:, :3] * weight[:, None]
