@@ -50,9 +50,9 @@ from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.blending import OpaqueMode, composite_over, opaque_prepass, prepass_structures
 from gpusim.schemes.common.alu import MBOIT_GENERATE, MBOIT_RESOLVE, PREMULTIPLY, mboit_reconstruct
-from gpusim.metrics.composite import run_starts
+from gpusim.metrics.composite import runs_by_length
 from gpusim.schemes.common.groups import PixelGroups
-from gpusim.schemes.common.arrays import lex_order, put_rows
+from gpusim.schemes.common.arrays import put_rows
 from gpusim.schemes.common.moments import (BATCH, CONFIGS, absorbance, factor, moment_terms, transmittance_rows,
                                            warp_depth)
 from gpusim.schemes.common.storage import COLOUR_BYTES, effective_alpha, rounder
@@ -82,15 +82,11 @@ class RankMajor:
 
     def __init__(self, pix_sorted: np.ndarray):
         n = len(pix_sorted)
-        start = run_starts(pix_sorted)
-        length = np.diff(np.r_[start, n])
-        if n:
-            by_length = lex_order(length.max() - length)
-            start, length = start[by_length], length[by_length]
+        empty = np.zeros(0, np.int64)
+        start, _, active = runs_by_length(pix_sorted) if n else (empty, empty, empty)
         self.pixel = pix_sorted[start]
         self.pixels = len(start)
-        #: pixels with a fragment of rank j (non-increasing)
-        self.active = np.searchsorted(-length, -(np.arange(length[0] if n else 0) + 1), side="right")
+        self.active = active          # pixels with a fragment of rank j (non-increasing)
         self.position = np.empty(n, np.int64)         # rank-major position -> position in ``pix_sorted``
         for at, j, m in self._blocks():
             self.position[at:at + m] = start[:m] + j
