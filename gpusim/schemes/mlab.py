@@ -211,14 +211,15 @@ class MultiLayerAlphaBlending(Scheme):
             kernel = _compiled_later_fragments() if self.colour_format != "rgba16f" else None
             if kernel is not None:
                 kernel(keys, vals, merges, covered, start, length, key, value, L, self.colour_format == "rgba8")
-            flat = vals.reshape(P, L * 4)
-            for j in range(L, len(active) if kernel is None else L):
-                rows, i = covered[:active[j]], start[:active[j]] + j
-                k, v, merged = insert_and_merge(take_rows(keys, rows), take_rows(flat, rows).reshape(-1, L, 4),
-                                                key[i], take_rows(value, i), rnd)
-                put_rows(keys, rows, k)
-                put_rows(flat, rows, v.reshape(-1, L * 4))
-                merges[rows] += merged
+            else:
+                flat = vals.reshape(P, L * 4)
+                for j in range(L, len(active)):
+                    rows, i = covered[:active[j]], start[:active[j]] + j
+                    k, v, merged = insert_and_merge(take_rows(keys, rows), take_rows(flat, rows).reshape(-1, L, 4),
+                                                    key[i], take_rows(value, i), rnd)
+                    put_rows(keys, rows, k)
+                    put_rows(flat, rows, v.reshape(-1, L * 4))
+                    merges[rows] += merged
         # the resolve's output saturates to [0, 1] (rounded premultiplied colours and transmittances can sum past 1)
         image = np.clip(resolve_layers(vals, trace.background), 0.0, 1.0)
         struct = [Structure("layers", entry, P * L, int(occupied.sum()), f"{L} layers of 32-bit depth + "
