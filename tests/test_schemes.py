@@ -286,6 +286,20 @@ def test_kbuffer_sort_blend_is_exact_on_k_nearly_sorted_input():
     exact(run("kbuffer", t, k=k, mode="sort-blend"), t)
 
 
+def test_kbuffer_counts_max_disorder_as_its_definition():
+    """The scheme's stat (emitted_disorder, from the composited sequence alone) is max_disorder, the definition
+    against the depth-sorted sequence, on the hand-made cases below and on random piles with ties."""
+    from gpusim.schemes.kbuffer import emitted_disorder, max_disorder
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        counts = rng.integers(1, 12, rng.integers(1, 6))
+        pix = np.repeat(np.arange(len(counts)), counts)
+        key = rng.integers(0, 6, len(pix)).astype(np.uint32)          # few values: many equal depths
+        by_depth = np.lexsort((key, pix))
+        assert emitted_disorder(pix, key) == max_disorder(pix[by_depth], key[by_depth], pix, key)
+    assert emitted_disorder(np.zeros(0, np.int64), np.zeros(0, np.uint32)) == 0
+
+
 def test_kbuffer_max_disorder_counts_positions_out_of_depth_order():
     from gpusim.schemes.kbuffer import max_disorder
     # the function on hand-made sequences: one pixel of 5 distinct depths, reversed, is 4 out of place at the ends
