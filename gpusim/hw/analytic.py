@@ -256,7 +256,7 @@ def _group_passes(g, arange=np.arange, counted: dict | None = None):
     n = len(g.thread)
     if g.seq_pass is not None:          # op s of every thread in pass seq_pass[s]
         count = g.count
-        key = (count.__array_interface__["data"][0], count.shape, count.strides)
+        key = count_key(count)
         got = counted.get(key) if counted is not None else None
         if got is None:
             least, top = int(count.min()), int(count.max())
@@ -525,7 +525,7 @@ def analytic_timing(result, work, gpu) -> dict:
             memo = issuing = None
             if isinstance(sel, _StillIssuing):   # groups over one count array (views of it) share the threads
                 issuing = sel
-                memo = (sel.count.__array_interface__["data"][0], sel.count.shape, sel.count.strides, sel.s)
+                memo = (*count_key(sel.count), sel.s)
                 sel = still[memo] if memo in still else still.setdefault(memo, sel(nested, [*still.values(),
                                                                                                *last_still]))
             n = len(g.thread)
