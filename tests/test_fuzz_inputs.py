@@ -811,6 +811,35 @@ def test_hostile_command_line_values_are_rejected_in_one_line(valid_trace, tmp_p
     assert_rejected(code, stdout, stderr, output)
 
 
+def _cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:                   # pragma: no cover - platforms without affinity
+        return os.cpu_count() or 1
+
+
+@pytest.mark.parametrize("workers", ["{cpus+1}", "100000"])
+def test_more_workers_than_cpus_are_refused_in_one_line(tmp_path, capsys, monkeypatch, workers):
+    """Each local worker holds a model in memory: more than the CPUs here would only exhaust memory."""
+    monkeypatch.chdir(tmp_path)
+    experiment = tmp_path / "e.toml"
+    experiment.write_text(EXPERIMENT + SCHEME)
+    out = tmp_path / "out"
+    workers = workers.replace("{cpus+1}", str(_cpus() + 1))
+    code, stdout, stderr = run_cli(capsys, ["run", experiment, "-o", out, "--workers", workers, "--quiet"])
+    assert_rejected(code, stdout, stderr, out)
+    assert f"--workers {workers}" in stderr and f"1..{_cpus()}" in stderr and "--cluster" in stderr, stderr
+
+
+def test_as_many_workers_as_cpus_run(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    experiment = tmp_path / "e.toml"
+    experiment.write_text(EXPERIMENT + SCHEME)
+    code, stdout, stderr = run_cli(capsys, ["run", experiment, "-o", tmp_path / "out", "--workers", _cpus(),
+                                            "--quiet", "--no-report"])
+    assert code == 0, stderr
+
+
 # ------------------------------------------------------------------- results directories (gpusim report)
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from gpusim.errors import GpusimError
 from gpusim.experiment import DEFAULT_EXPERIMENT, describe_summary, load_experiment, run_experiment
+from gpusim.experiment.runner import check_workers
 
 
 def add_parser(sub) -> None:
@@ -21,7 +22,8 @@ def add_parser(sub) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an experiment key, e.g. --set fidelity='[\"full\"]' --set schemes.kbuffer.k=[4]")
     p.add_argument("--workers", type=int, metavar="N",
-                   help="local worker processes (default: one per available CPU; 1 runs in this process)")
+                   help="local worker processes, 1 up to the CPUs available (the default: one per CPU; "
+                        "1 runs in this process); --cluster for more")
     p.add_argument("--cluster", metavar="ADDRESS", help="run on a dask.distributed scheduler, e.g. tcp://host:8786")
     p.add_argument("--no-report", action="store_true", help="write the tables only; no index.md or figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar or progress lines; errors still print")
@@ -29,10 +31,9 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    if args.workers is not None and args.workers < 1:
-        raise GpusimError(f"--workers {args.workers}: give at least 1 (1 runs in this process)")
     if args.workers is not None and args.cluster:
         raise GpusimError("--workers and --cluster exclude each other: the cluster's workers run the tasks")
+    check_workers(args.workers)               # 1..the CPUs here: before anything is read or written
     exp = load_experiment(args.file, args.set)
     out = Path(args.output or Path("reports") / exp.name)
     try:                                      # SIGTERM arrives as KeyboardInterrupt (gpusim.cli.main)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpusim.errors import GpusimError
 from gpusim.experiment.execute import Outcome, Task, TaskRun
 from gpusim.experiment.executors import make_executor, probe
 from gpusim.experiment.grid import GPU_LEVELS, RunSpec, expand, resolved_run, run_id
@@ -70,6 +71,20 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def check_workers(workers: int | None) -> None:
+    """Refuse a number of local worker processes below 1 or above the CPUs this process may use: each
+    worker holds its traces and a model in memory, so more than the CPUs only exhausts memory."""
+    if workers is None:
+        return
+    if workers < 1:
+        raise GpusimError(f"--workers {workers}: give at least 1 (1 runs in this process)")
+    cpus = default_workers()
+    if workers > cpus:
+        cpu_s = "CPU is" if cpus == 1 else "CPUs are"
+        raise GpusimError(f"--workers {workers}: only {cpus} {cpu_s} available here, so give 1..{cpus} "
+                          "(or leave it out: one per CPU); for more, run on a cluster with --cluster ADDRESS")
+
+
 def describe_run(run: RunSpec) -> str:
     params = ",".join(f"{k}={v}" for k, v in run.params.items())
     sets = "".join(f" {k}={v}" for k, v in run.gpu_set)
@@ -100,6 +115,8 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
                    quiet: bool = False) -> Summary:
     """Run every grid point of ``exp`` into ``out`` (resuming what an earlier sweep there finished)."""
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    if not cluster:
+        check_workers(workers)
     runs = expand(exp)
     if cluster:
         probe(cluster)                     # an unreachable cluster fails before anything is written
