@@ -14,6 +14,7 @@ memory stays near the size of the finished trace.
 
 from __future__ import annotations
 
+import csv
 import os
 import warnings
 from pathlib import Path
@@ -23,6 +24,7 @@ import pandas as pd
 
 from gpusim.errors import TraceError
 from gpusim.trace import DTYPES, FragmentTrace
+from gpusim.trace_io import check_input_file
 
 REQUIRED = ("x", "y", "z", "r", "g", "b", "a")
 OPTIONAL = ("prim", "opaque")
@@ -43,6 +45,26 @@ def _count_rows(path: Path) -> int:
     return max(lines - 1, 0)
 
 
+def _shown(value) -> str:
+    """A cell as the message shows it: numbers plain (2, not numpy's np.int64(2)), text quoted."""
+    return repr(value.item() if isinstance(value, np.generic) else value)
+
+
+def _field_count_error(path: Path, fields: int) -> tuple[int, int] | None:
+    """The (line, field count) of the first row with more fields than the header's ``fields``, read with
+    Python's csv module (quotes and CR/LF/CRLF line ends as pandas reads them); None if every row fits."""
+    try:
+        with open(path, newline="", encoding="utf-8", errors="replace") as handle:
+            reader = csv.reader(handle, skipinitialspace=True)
+            next(reader, None)
+            for row in reader:
+                if row and len(row) > fields:
+                    return reader.line_num, len(row)
+    except csv.Error:
+        return None
+    return None
+
+
 def _numeric(chunk: pd.DataFrame, column: str, path: Path, first_row: int) -> np.ndarray:
     series = chunk[column]
     if pd.api.types.is_bool_dtype(series):     # pandas reads a column of true/false as booleans: not numbers
@@ -52,7 +74,7 @@ def _numeric(chunk: pd.DataFrame, column: str, path: Path, first_row: int) -> np
         bad = np.flatnonzero(coerced.isna().to_numpy())
         if bad.size:
             line = first_row + int(bad[0]) + 2
-            raise TraceError(f"{path}:{line}: column '{column}' holds {series.iloc[bad[0]]!r}, "
+            raise TraceError(f"{path}:{line}: column '{column}' holds {_shown(series.iloc[bad[0]])}, "
                              "not a number; fix that row")
         series = coerced
     values = series.to_numpy(dtype=np.float64, na_value=np.nan)
@@ -90,7 +112,8 @@ def _opaque(chunk: pd.DataFrame, path: Path, first_row: int) -> np.ndarray:
     bad = np.flatnonzero(mapped.isna().to_numpy())
     if bad.size:
         line = first_row + int(bad[0]) + 2
-        raise TraceError(f"{path}:{line}: opaque={series.iloc[bad[0]]!r} is not 0/1 or true/false")
+        raise TraceError(f"{path}:{line}: opaque={_shown(series.iloc[bad[0]])} is not 0/1 or true/false; "
+                         "fix the row")
     return mapped.to_numpy(dtype=bool)
 
 
@@ -118,6 +141,11 @@ def _fill(path: Path, columns: list[str], n: int, width: int, height: int, out: 
             out["opaque"][sl] = _opaque(chunk, path, pos) if "opaque" in columns else False
             pos += rows
     except (pd.errors.ParserError, pd.errors.ParserWarning) as exc:
+        found = _field_count_error(path, len(columns))
+        if found:                         # pandas' own text may lack the line (an extra field in the first row)
+            line, fields = found
+            raise TraceError(f"{path}:{line}: malformed CSV: {fields} fields where the header has {len(columns)}; "
+                             f"give every row exactly {len(columns)} fields") from None
         raise TraceError(f"{path}: malformed CSV ({str(exc).strip().splitlines()[0]}); every row needs "
                          f"exactly {len(columns)} fields") from None
     except UnicodeDecodeError as exc:
@@ -130,16 +158,26 @@ def read_csv_trace(path: str | os.PathLike, width: int, height: int,
                    meta: dict | None = None) -> FragmentTrace:
     """Read a CSV fragment list (format in the module docstring) into a FragmentTrace."""
     path = Path(path)
-    if not path.is_file():
-        raise TraceError(f"{path}: no such CSV file; check the path")
-    try:
-        header = pd.read_csv(path, nrows=0).columns
+    check_input_file(path, "CSV file", "check the path")
+    try:                                  # the header as data: pandas would rename a repeated name (z -> z.1)
+        header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False).iloc[0]
     except (pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise TraceError(f"{path}: not a CSV file with a header line x,y,z,r,g,b,a ({exc})") from None
     except pd.errors.ParserError as exc:   # e.g. a quote left open: pandas reads past the header to find its end
         raise TraceError(f"{path}: malformed CSV ({str(exc).strip().splitlines()[0]}); close every quote "
                          f"and give every row the header's fields") from None
     columns = [str(c).strip() for c in header]
+    repeated = list(dict.fromkeys(c for c in columns if columns.count(c) > 1))
+    if repeated:
+        if len(repeated) == 1:
+            times = columns.count(repeated[0])
+            which = f"column {repeated[0]} appears {'twice' if times == 2 else f'{times} times'}"
+        else:
+            which = f"columns {', '.join(repeated)} each appear more than once"
+        raise TraceError(f"{path}: {which} in the header; keep one of each")
+    if "" in columns:
+        raise TraceError(f"{path}: the header has an empty column name (field {columns.index('') + 1}; a "
+                         "trailing comma?); name every column: x,y,z,r,g,b,a (optional: prim, opaque)")
     missing = [c for c in REQUIRED if c not in columns]
     if missing:
         raise TraceError(f"{path}: missing column(s) {', '.join(missing)}; the header must hold "
@@ -148,8 +186,6 @@ def read_csv_trace(path: str | os.PathLike, width: int, height: int,
     if unknown:
         raise TraceError(f"{path}: unknown column(s) {', '.join(unknown)}; valid columns are "
                          f"{', '.join(REQUIRED + OPTIONAL)}")
-    if len(set(columns)) != len(columns):
-        raise TraceError(f"{path}: a column name appears twice in the header; keep one of each")
 
     n = _count_rows(path)
     out = {name: np.empty((n, 4) if name == "rgba" else n, dtype=dt) for name, dt in DTYPES.items()}

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import tokenize
 import zipfile
 import zlib
@@ -24,6 +25,23 @@ from gpusim.trace import DTYPES, FragmentTrace
 
 FORMAT_VERSION = 1
 _SCALARS = ("format_version", "width", "height", "meta_json")
+
+
+def check_input_file(path: Path, kind: str, missing: str) -> None:
+    """Refuse, in one line, an input ``path`` that is missing (``missing`` says what to do), a directory,
+    or not a regular file (a FIFO, a device such as /dev/zero, a socket: reading one may never end)."""
+    try:
+        mode = path.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        raise TraceError(f"{path}: no such {kind}; {missing}") from None
+    except OSError as exc:
+        raise TraceError(f"{path}: cannot read it ({exc.strerror or exc}); check the path") from None
+    if stat.S_ISDIR(mode):
+        raise TraceError(f"{path}: is a directory, not a {kind}; name the file")
+    if not stat.S_ISREG(mode):
+        what = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+                else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a special file")
+        raise TraceError(f"{path}: is {what}, not a regular file; give a {kind} saved on disk")
 
 
 def save_trace(trace: FragmentTrace, path: str | os.PathLike) -> Path:
@@ -43,8 +61,7 @@ def load_trace(path: str | os.PathLike) -> FragmentTrace:
     """Load and validate a trace; raise :class:`TraceError` with one clear line on any problem."""
     path = Path(path)
     fix = "re-create it with 'gpusim trace'"
-    if not path.is_file():
-        raise TraceError(f"{path}: no such trace file; check the path or create one with 'gpusim trace'")
+    check_input_file(path, "trace file", "check the path or create one with 'gpusim trace'")
     with open(path, "rb") as handle:
         if handle.read(4) != b"PK\x03\x04":
             raise TraceError(f"{path}: not a gpusim trace (.npz) file; give a trace written by 'gpusim trace'")

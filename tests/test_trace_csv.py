@@ -62,7 +62,13 @@ def test_chunked_reading_matches(tmp_path, monkeypatch):
     ("x,y,z,r,g,b,a\n0,0,1.5,1,1,1,1\n", "f.csv:2: fragment 0 has depth 1.5 outside [0, 1]"),
     ("x,y,z,r,g,b,a\n0,0,0.5,1,1,1,2\n", "colour/alpha"),
     ("x,y,z,r,g,b,a,opaque\n0,0,0.5,1,1,1,1,maybe\n", "opaque='maybe'"),
-    ("x,y,z,r,g,b,a\n0,0,0.5,1,1,1,1,9,9\n", "malformed CSV"),
+    ("x,y,z,r,g,b,a,opaque\n0,0,0.5,1,1,1,1,2\n", "f.csv:2: opaque=2 is not 0/1 or true/false"),
+    ("x,y,z,r,g,b,a,z\n0,0,0.5,1,1,1,1,0.5\n", "f.csv: column z appears twice in the header; keep one"),
+    ("x,y,z,r,g,b,a,a,z\n0,0,0.5,1,1,1,1,1,1\n", "columns z, a each appear more than once in the header"),
+    ("x,y,z,r,g,b,a,\n0,0,0.5,1,1,1,1,\n", "empty column name (field 8"),
+    ("x,y,z,r,g,b,a\n0,0,0.5,1,1,1,1,9,9\n", "f.csv:2: malformed CSV: 9 fields where the header has 7"),
+    ("x,y,z,r,g,b,a\n0,0,0.5,1,1,1,1\n0,0,0.5,1,1,1,1,9\n", "f.csv:3: malformed CSV: 8 fields where the header has 7"),
+    ('x,y,z,r,g,b,a\n0,0,"0.\n5",1,1,1,1\n0,0,0.5,1,1,1,1,9\n', "f.csv:4: malformed CSV: 8 fields"),
     ("", "not a CSV file"),
 ])
 def test_bad_csv_fails_with_one_line(tmp_path, body, expect):
@@ -70,4 +76,30 @@ def test_bad_csv_fails_with_one_line(tmp_path, body, expect):
     with pytest.raises(TraceError) as exc:
         read_csv_trace(path, 4, 4)
     assert expect in str(exc.value)
-    assert "\n" not in str(exc.value)
+    assert "\n" not in str(exc.value) and "np." not in str(exc.value) and "z.1" not in str(exc.value)
+
+
+def test_extra_field_in_a_later_chunk_names_its_line(tmp_path, monkeypatch):
+    import gpusim.trace_csv as mod
+    monkeypatch.setattr(mod, "CHUNK_ROWS", 3)
+    path = write(tmp_path, "x,y,z,r,g,b,a\n" + "0,0,0.5,1,1,1,1\n" * 7 + "0,0,0.5,1,1,1,1,9\n")
+    with pytest.raises(TraceError, match=r"f\.csv:9: malformed CSV: 8 fields where the header has 7"):
+        read_csv_trace(path, 4, 4)
+
+
+@pytest.mark.parametrize("kind", ["directory", "fifo", "device"])
+def test_a_csv_that_is_not_a_regular_file_says_what_it_is(tmp_path, kind):
+    import os
+    path = tmp_path / "f.csv"
+    if kind == "directory":
+        path.mkdir()
+        expect = "f.csv: is a directory, not a CSV file"
+    elif kind == "fifo":
+        os.mkfifo(path)                         # opening it would wait for a writer for ever
+        expect = "f.csv: is a FIFO (named pipe), not a regular file"
+    else:
+        path = "/dev/zero"                      # reading it never ends
+        expect = "/dev/zero: is a device, not a regular file"
+    with pytest.raises(TraceError) as exc:
+        read_csv_trace(path, 4, 4)
+    assert expect in str(exc.value) and "no such" not in str(exc.value)
