@@ -34,6 +34,9 @@ def param(default: Any = dataclasses.MISSING, *, unit: str = "", doc: str = "",
 
 
 def _fmt(value: Any) -> str:
+    """A value as an error shows it; an empty string (``--param k=``) is said to be empty, not shown as ''."""
+    if value == "":
+        return "an empty value (give one after the '=')"
     return repr(value) if isinstance(value, str) else str(value)
 
 

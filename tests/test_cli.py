@@ -73,6 +73,16 @@ def test_csv_import_through_cli(tmp_path, capsys):
     (["trace", "--from-csv", "{tmp}/bad.csv", "-o", "{tmp}/o.npz"], "needs the screen size"),
     (["trace", "--from-csv", "{tmp}/bad.csv", "--size", "4x4", "-o", "{tmp}/o.npz"], "bad.csv:2: column 'z' is empty or NaN"),
     (["info", "{tmp}/missing.npz"], "no such trace file"),
+    (["info", "{tmp}"], "is a directory, not a trace file; name the file"),
+    (["info", "/dev/zero"], "/dev/zero: is a device, not a regular file"),
+    (["trace", "{tmp}/bad.csv", "-o", "{tmp}/o.npz"],
+     "bad.csv: a CSV fragment list is not a scene; import it with --from-csv: gpusim trace --from-csv"),
+    (["replay", "{tmp}/bad.csv", "--scheme", "alpha-blend", "--fidelity", "analytic", "--gpu", "{tmp}"],
+     "is a directory, not a GPU file; give a GPU .toml file or a preset (geforce7900gtx, gtx280"),
+    (["replay", "{tmp}/bad.csv", "--scheme", "alpha-blend", "--fidelity", "analytic", "--gpu", "/dev/zero"],
+     "--gpu /dev/zero: not a regular file"),
+    (["replay", "{tmp}/bad.csv", "--scheme", "alpha-blend", "--fidelity", "analytic", "--gpu", "{tmp}/nope"],
+     "no such GPU file; check the path"),
     (["show", "{tmp}/bad.csv", "-o", "{tmp}/png"], "not a gpusim trace (.npz) file"),
 ])
 def test_bad_input_is_one_line_nonzero_and_leaves_no_output(tmp_path, capsys, argv, expect):
@@ -83,6 +93,39 @@ def test_bad_input_is_one_line_nonzero_and_leaves_no_output(tmp_path, capsys, ar
     assert code == 2 and expect in err
     assert err.count("\n") == 1 and err.startswith("gpusim: error:")
     assert not (tmp_path / "o.npz").exists() and not (tmp_path / "png").exists()
+
+
+def test_a_fifo_given_as_a_trace_is_refused_without_blocking(tmp_path, capsys):
+    import os
+    os.mkfifo(tmp_path / "t.npz")                     # opening it would wait for a writer for ever
+    code, out, err = run(capsys, "info", str(tmp_path / "t.npz"))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "t.npz: is a FIFO (named pipe), not a regular file" in err
+
+
+def test_one_of_a_thing_is_singular(tmp_path, capsys):
+    """1 fragment on 1 pixel, not "1 fragments on 1 pixels"."""
+    csv = tmp_path / "one.csv"
+    csv.write_text("x,y,z,r,g,b,a\n0,0,0.5,1,0,0,0.5\n")
+    trace = tmp_path / "one.npz"
+    code, text, err = run(capsys, "trace", "--from-csv", str(csv), "--size", "2x2", "-o", str(trace))
+    assert code == 0 and ": 1 fragment, 1 covered pixel, " in text, err
+    code, text, err = run(capsys, "info", str(trace))
+    assert code == 0 and "1 from 1 primitive\n" in text and "covered      1 pixel (" in text, err
+    code, text, err = run(capsys, "replay", str(trace), "--scheme", "alpha-blend", "--fidelity", "analytic")
+    assert code == 0 and "1 fragment on 1 pixel\n" in text and "0 fragments (0 pixels lost some)" in text, err
+    for plural in ("1 fragments", "1 pixels", "1 primitives", "1 replicates", "1 requests"):
+        assert plural not in text
+
+
+def test_an_empty_param_value_is_said_to_be_empty(tmp_path, capsys):
+    csv = tmp_path / "one.csv"
+    csv.write_text("x,y,z,r,g,b,a\n0,0,0.5,1,0,0,0.5\n")
+    trace = tmp_path / "one.npz"
+    assert run(capsys, "trace", "--from-csv", str(csv), "--size", "2x2", "-o", str(trace))[0] == 0
+    code, out, err = run(capsys, "replay", str(trace), "--scheme", "kbuffer", "--param", "k=")
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "k: expected an integer, got an empty value (give one after the '=')" in err and "''" not in err
 
 
 def test_usage_errors_are_one_line():

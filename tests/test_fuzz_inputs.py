@@ -374,6 +374,10 @@ CSV_CASES = {
     "header-missing-alpha": b"x,y,z,r,g,b\n0,0,0.5,1,1,1\n",
     "unknown-column": b"x,y,z,r,g,b,a,w\n0,0,0.5,1,1,1,1,1\n",
     "duplicate-column": b"x,y,z,r,g,b,a,a\n0,0,0.5,1,1,1,1,1\n",
+    "duplicate-depth-column": b"x,y,z,r,g,b,a,z\n0,0,0.5,1,1,1,1,0.5\n",
+    "empty-column-name": b"x,y,z,r,g,b,a,\n0,0,0.5,1,1,1,1,\n",
+    "extra-field-first-row": (HEADER + "0,0,0.5,1,1,1,1,9\n").encode(),
+    "opaque-two": b"x,y,z,r,g,b,a,opaque\n0,0,0.5,1,1,1,1,2\n",
     "semicolon-separated": b"x;y;z;r;g;b;a\n0;0;0.5;1;1;1;1\n",
     "extra-field": (HEADER + ROW + "0,0,0.5,1,1,1,1,9\n").encode(),
     "missing-field": (HEADER + ROW + "0,0,0.5,1,1,1\n").encode(),
@@ -747,7 +751,7 @@ def test_the_valid_experiment_passes_config(tmp_path, capsys):
     path = tmp_path / "e.toml"
     path.write_text(EXPERIMENT + SCHEME)
     code, stdout, stderr = run_cli(capsys, ["config", path])
-    assert code == 0 and "1 runs" in stdout, stderr
+    assert code == 0 and "1 run" in stdout and "1 runs" not in stdout, stderr
 
 
 def test_experiment_with_a_corrupt_trace_is_rejected_in_one_line(valid_trace, tmp_path, capsys):
@@ -772,6 +776,10 @@ ARGV_CASES = {
     "param-a-table": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k={a = 1}", "-o", "{out}"],
     "param-bool-for-int": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k=true", "-o", "{out}"],
     "param-unknown-choice": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "mode=7", "-o", "{out}"],
+    "param-empty": ["replay", "{trace}", "--scheme", "kbuffer", "--param", "k=", "-o", "{out}"],
+    "gpu-a-directory": ["replay", "{trace}", "--scheme", "kbuffer", "--fidelity", "analytic", "--gpu", "/",
+                        "-o", "{out}"],
+    "trace-a-csv-as-scene": ["trace", "{experiment}.csv", "-o", "{out}.npz"],
     "fidelity-unknown": ["replay", "{trace}", "--scheme", "kbuffer", "--fidelity", "warp", "-o", "{out}"],
     "thesis-for-other-scheme": ["replay", "{trace}", "--scheme", "kbuffer", "--fidelity", "thesis", "-o", "{out}"],
     "gpu-set-nan": ["replay", "{trace}", "--scheme", "kbuffer", "--fidelity", "sampled", "--gpu-set",

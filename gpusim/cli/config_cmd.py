@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from gpusim.cli.common import counted
 from gpusim.experiment import expand, load_experiment
 
 
@@ -40,5 +41,5 @@ def run(args) -> int:
     for row in [head, *rows]:
         print("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip())
     skipped = sum(1 for r in runs if r.skip)
-    print(f"{len(runs)} runs" + (f" ({skipped} skipped)" if skipped else ""))
+    print(counted(len(runs), "run") + (f" ({skipped} skipped)" if skipped else ""))
     return 0

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from gpusim.cli.common import print_json
+from gpusim.cli.common import counted, print_json
 from gpusim.trace_info import bucket_histogram, describe
 from gpusim.trace_io import load_trace
 
@@ -24,13 +24,13 @@ def run(args) -> int:
     scene = info["meta"].get("scene", "-")
     print(f"trace        {args.trace} (scene: {scene})")
     print(f"screen       {info['width']}x{info['height']} pixels")
-    print(f"fragments    {info['fragments']:,} from {info['primitives']:,} primitives")
+    print(f"fragments    {info['fragments']:,} from {counted(info['primitives'], 'primitive')}")
     submitted = info["primitives_submitted"]
     if submitted is not None:
         print(f"primitives   {submitted:,} submitted; {submitted - info['primitives']:,} made no fragment (culled, "
               "clipped, off screen or between pixel centres)")
     print(f"transparent  {info['transparent_fragments']:,} ({100 * info['transparent_share']:.1f}%)")
-    print(f"covered      {info['covered_pixels']:,} pixels ({100 * info['covered_share']:.1f}% of the screen)")
+    print(f"covered      {counted(info['covered_pixels'], 'pixel')} ({100 * info['covered_share']:.1f}% of the screen)")
     print(f"depth        max {dc['max']}, mean {dc['mean']:.2f} fragments per covered pixel")
     print("histogram    fragments/pixel  pixels")
     for label, pixels in bucket_histogram(dc["histogram"]):

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from gpusim.atomic_io import atomic_folder, write_text_atomic
-from gpusim.cli.common import check_output, print_json
+from gpusim.cli.common import check_output, counted, print_json
 from gpusim.errors import GpusimError
 from gpusim.hw import DEFAULT_GPU, FIDELITIES, gpu_presets, load_gpu
 from gpusim.replay import jsonable, parse_params, replay
@@ -58,10 +59,28 @@ def _value(value) -> str:
     return str(value)
 
 
+def check_gpu_arg(spec: str | None) -> None:
+    """Refuse a ``--gpu`` that names a directory, a special file (a FIFO would block the read) or a missing
+    path, saying so, before it could be taken for an unknown preset name."""
+    if spec is None or spec in gpu_presets():
+        return
+    path = Path(spec)
+    presets = f"or a preset ({', '.join(gpu_presets())})"
+    if path.is_dir():
+        raise GpusimError(f"--gpu {spec}: is a directory, not a GPU file; give a GPU .toml file {presets}")
+    if path.exists() and not path.is_file():
+        raise GpusimError(f"--gpu {spec}: not a regular file (a device, FIFO or socket); give a GPU .toml "
+                          f"file {presets}")
+    if not path.exists() and os.sep in spec and path.suffix != ".toml":
+        raise GpusimError(f"--gpu {spec}: no such GPU file; check the path, or give a preset "
+                          f"({', '.join(gpu_presets())})")
+
+
 def run(args) -> int:
     if (args.gpu or args.gpu_set) and not args.fidelity:
         raise GpusimError("--gpu-set/--gpu need --fidelity LEVEL: only a timing model uses the GPU; "
                           "add e.g. --fidelity analytic, or drop --gpu/--gpu-set")
+    check_gpu_arg(args.gpu)
     out = check_output(args.output, folder=True) if args.output else None
     trace = load_trace(args.trace)
     params = parse_params(args.param)
@@ -80,13 +99,18 @@ def run(args) -> int:
     return 0
 
 
+def _differ(n: int) -> str:
+    return f"{counted(n, 'pixel')} {'differs' if n == 1 else 'differ'}"
+
+
 def _text(args, record: dict) -> str:
     """The text report of a replay record."""
     lines: list[str] = []
     add = lines.append
     e = record["error"]
     add(f"scheme       {record['scheme']}  " + " ".join(f"{k}={v}" for k, v in record["params"].items()))
-    add(f"trace        {args.trace}: {record['fragments']:,} fragments on {record['pixels']:,} pixels")
+    add(f"trace        {args.trace}: {counted(record['fragments'], 'fragment')} on "
+        f"{counted(record['pixels'], 'pixel')}")
     add(f"passes       {record['geometry_passes']} geometry; "
         + ", ".join(p["name"] for p in record["passes"][:8]) + (" ..." if len(record["passes"]) > 8 else ""))
     add("footprint    structure          allocated       used")
@@ -96,11 +120,12 @@ def _text(args, record: dict) -> str:
     for name, ops in record["accesses"].items():
         for op, count in ops.items():
             add(f"             {name:<16} {op:<12} {count:>12,}")
-    add(f"dropped      {record['dropped_fragments']:,} fragments ({record['overflowed_pixels']:,} pixels lost some)")
+    add(f"dropped      {counted(record['dropped_fragments'], 'fragment')} "
+        f"({counted(record['overflowed_pixels'], 'pixel')} lost some)")
     for name, stat in record["stats"].items():
         add(f"stat         {name} = {_value(stat['value'])} {stat['unit']}  ({stat['doc']})")
     psnr = "inf" if e["psnr"] == float("inf") else f"{e['psnr']:.2f}"
-    add(f"error        rmse {e['rmse']:.3g}, psnr {psnr} dB, {e['differing_pixels']:,} pixels differ "
+    add(f"error        rmse {e['rmse']:.3g}, psnr {psnr} dB, {_differ(e['differing_pixels'])} "
         f"by more than one 8-bit step")
     if "timing" in record:
         _timing_text(record["timing"], add)
@@ -117,32 +142,39 @@ def _timing_text(t: dict, add) -> None:
             f"{t['compute_cycles']:,} compute, {t['compute_formula']} per pixel)")
         return
     add(f"cycles       {t['cycles']:,} ({t['fidelity']} on {t['gpu']}: {t['microseconds']:,.1f} us; "
-        f"{t['instructions']:,} warp instructions, {t['wall_seconds']:.2f} s)")
+        f"{counted(t['instructions'], 'warp instruction')}, {t['wall_seconds']:.2f} s)")
     if "cycles_ci95_low" in t:
         s = t["sample"]
         add(f"  95% CI     {t['cycles_ci95_low']:,} to {t['cycles_ci95_high']:,} cycles (error estimate "
-            f"{t['cycle_error_estimate']:.1%}: standard error over the cycles, from {s['replicates']} replicates "
-            f"of {s['sms']} SM{'s' if s['sms'] != 1 else ''} each, {s['tiles_per_replicate']:,} of "
-            f"{s['tiles']:,} tiles)")
+            f"{t['cycle_error_estimate']:.1%}: standard error over the cycles, from "
+            f"{counted(s['replicates'], 'replicate')} of {counted(s['sms'], 'SM')} each, "
+            f"{s['tiles_per_replicate']:,} of {counted(s['tiles'], 'tile')})")
     for p in t["passes"][:12]:
         extra = f"  bound: {p['bound']}" if "bound" in p else ""
         add(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")
     if len(t["passes"]) > 12:
         add(f"  pass       ... {len(t['passes']) - 12} more")
     if t.get("repeated_passes"):
-        add(f"  note       {t['repeated_passes']:,} passes repeat an earlier pass's work (each group within "
-            "1% of its threads): timed once, counted each time")
+        n = t["repeated_passes"]
+        add(f"  note       {counted(n, 'pass', 'passes')} {'repeats' if n == 1 else 'repeat'} an earlier pass's work "
+            "(each group within 1% of its threads): timed once, counted each time")
+    if t.get("interpolated_passes"):
+        n = t["interpolated_passes"]
+        add(f"  note       {counted(n, 'pass', 'passes')} of long families whose threads only shrink "
+            f"{'is' if n == 1 else 'are'} interpolated between timed passes (each bound on a straight line, "
+            "checked at the midpoint)")
     for name, u in t["units"].items():
         if "utilisation_mean" in u:
             add(f"  unit       {name:<10} utilisation mean {u['utilisation_mean']:.1%}"
                 + (f", max {u['utilisation_max']:.1%}" if "utilisation_max" in u else ""))
         else:
-            add(f"  unit       {name:<10} {u.get('requests', 0):,} requests")
+            add(f"  unit       {name:<10} {counted(u.get('requests', 0), 'request')}")
     if t.get("rmw_hazards") is not None:
-        line = f"{t['rmw_hazards']:,} fragments read an obsolete value ({t['rmw_hazard_pixels']:,} pixels)"
+        line = (f"{counted(t['rmw_hazards'], 'fragment')} read an obsolete value "
+                f"({counted(t['rmw_hazard_pixels'], 'pixel')})")
         if "rmw_image_error" in t:
             e = t["rmw_image_error"]
-            line += f"; image in event order: rmse {e['rmse']:.3g}, {e['differing_pixels']:,} pixels differ"
+            line += f"; image in event order: rmse {e['rmse']:.3g}, {_differ(e['differing_pixels'])}"
         add(f"rmw hazards  {line}")
 
 

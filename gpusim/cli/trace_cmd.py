@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from gpusim.cli.common import check_output, parse_size
+from gpusim.cli.common import check_output, counted, parse_size
 from gpusim.errors import GpusimError
 from gpusim.scene import load_scene, trace_scene
 from gpusim.trace_csv import read_csv_trace
@@ -44,11 +44,15 @@ def run(args) -> int:
     else:
         if not args.scene:
             raise GpusimError("name a SCENE (scene file, built-in name or mesh file) or use --from-csv")
+        if Path(args.scene).suffix.lower() == ".csv":
+            size = args.size or "WIDTHxHEIGHT"
+            raise GpusimError(f"{args.scene}: a CSV fragment list is not a scene; import it with --from-csv: "
+                              f"gpusim trace --from-csv {args.scene} --size {size} -o {args.output}")
         size = parse_size(args.size) if args.size else None
         scene, base = load_scene(args.scene, args.set, alpha=args.alpha, size=size)
         trace = trace_scene(scene, base, where=args.scene, progress=progress)
     save_trace(trace, out)
     dc = trace.depth_complexity()
-    print(f"wrote {out}: {len(trace):,} fragments, {int((dc > 0).sum()):,} covered pixels, "
+    print(f"wrote {out}: {counted(len(trace), 'fragment')}, {counted(int((dc > 0).sum()), 'covered pixel')}, "
           f"max depth complexity {int(dc.max())} ({time.perf_counter() - start:.2f} s)")
     return 0

@@ -168,8 +168,8 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
     where = f"on the cluster at {cluster}" if cluster else (
         f"on {n_workers} worker processes" if n_workers > 1 else "in this process")
     skipped = sum(summary.skip_reasons.values())
-    say(f"{exp.name}: {len(runs)} runs ({skipped} skipped), {summary.reused} reused from {out}, "
-        f"{todo} to compute {where}")
+    say(f"{exp.name}: {len(runs)} run{'s' * (len(runs) != 1)} ({skipped} skipped), {summary.reused} reused "
+        f"from {out}, {todo} to compute {where}")
 
     def tables():
         rows, stats = [], []
@@ -221,9 +221,10 @@ def describe_summary(summary: Summary) -> list[str]:
     lines += [f"failed: {what}: {error}" for what, error in summary.failures[:20]]
     if len(summary.failures) > 20:
         lines.append(f"failed: ... {len(summary.failures) - 20} more (see the error column of results.csv)")
-    lines.append(f"{summary.ok} ok, {summary.failed} failed, {summary.skipped} skipped of {summary.runs} runs "
+    lines.append(f"{summary.ok} ok, {summary.failed} failed, {summary.skipped} skipped of {summary.runs} "
+                 f"run{'s' * (summary.runs != 1)} "
                  f"({summary.reused} reused, {summary.computed} computed); results in {summary.out}")
     if summary.failed:
-        lines.append(f"{summary.failed} of {summary.runs} runs failed")
+        lines.append(f"{summary.failed} of {summary.runs} run{'s' * (summary.runs != 1)} failed")
     return lines
 

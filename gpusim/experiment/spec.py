@@ -399,6 +399,9 @@ def gpu_table(spec: str, exp: Experiment) -> dict:
     if spec in gpu_presets():
         return load_toml(preset_file(spec))
     path = exp.resolve_path(spec)
+    if spec and path.is_dir():
+        raise ConfigError(f"{exp.path}: gpus: {spec}: is a directory, not a GPU file; give a .toml file or a "
+                          f"preset (valid: {', '.join(gpu_presets())})")
     if path.suffix == ".toml" and path.is_file():
         data = load_toml(path)
         try:

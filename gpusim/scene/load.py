@@ -79,8 +79,10 @@ def load_scene(arg: str, overrides: Iterable[str] = (), alpha: float | None = No
             raise ConfigError("--alpha applies to mesh files only; set objects.N.alpha in a scene file")
         table = load_toml(path)
     else:
+        csv = ("; a CSV fragment list is imported with 'gpusim trace --from-csv FILE --size WxH -o OUT.npz'"
+               if path.suffix.lower() == ".csv" else "")
         raise ConfigError(f"{path}: unsupported scene file type '{path.suffix}' "
-                          f"(valid: .toml, {', '.join(MESH_SUFFIXES)})")
+                          f"(valid: .toml, {', '.join(MESH_SUFFIXES)}){csv}")
     overrides = list(overrides)
     labels = [f"--set {text}" for text in overrides]
     if size is not None:
