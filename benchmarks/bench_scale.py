@@ -86,6 +86,7 @@ def _level(result, trace, level: str, gpu, reference) -> dict:
     rec = got[0]
     return {"status": "ok", "wall": wall, "cpu": cpu, "cycles": rec["cycles"],
             "repeated_passes": sum(1 for p in rec.get("passes", []) if "repeat_of" in p),
+            "interpolated_passes": sum(1 for p in rec.get("passes", []) if "interpolated" in p),
             "streamed": rec.get("streamed")}
 
 
@@ -189,7 +190,7 @@ def stress(schemes, levels, scenes, timeout: float) -> bool:
     for scene in (BASELINE, *scenes):
         first = next((g for (s, _), g in got.items() if s == scene and "fragments" in g), {})
         print(f"\n{scene} ({first.get('size', '?')}, {first.get('fragments', 0):,} fragments)")
-        print(f"{'scheme':<{W}}" + "".join(f"{lv:>22}" for lv in levels) + f"{'peak MB':>9}")
+        print(f"{'scheme':<{W}}" + "".join(f"{lv:>30}" for lv in levels) + f"{'peak MB':>9}")
         for scheme in schemes:
             g = got[scene, scheme]
             if "failed" in g:
@@ -215,12 +216,14 @@ def stress(schemes, levels, scenes, timeout: float) -> bool:
                     ratio = us / _us(b, base["fragments"])
                     worst.append((ratio, f"{scene} {scheme} {level}"))
                     text += f" {ratio:6.1f}x"
-                if e.get("repeated_passes"):
-                    text += f" [{e['repeated_passes']} rep]"
+                marks = [f"{e[k]} {short}" for k, short in (("repeated_passes", "rep"), ("interpolated_passes", "int"))
+                         if e.get(k)]
+                if marks:
+                    text += f" [{', '.join(marks)}]"
                 cells.append(text)
-            print(f"{scheme:<{W}}" + "".join(f"{c:>22}" for c in cells) + f"{g['peak'] / 2**20:9,.0f}")
-    print("\n[N rep]: N passes repeat an earlier pass's work; the analytic level times them once and counts "
-          "them again")
+            print(f"{scheme:<{W}}" + "".join(f"{c:>30}" for c in cells) + f"{g['peak'] / 2**20:9,.0f}")
+    print("\n[N rep, M int]: N passes repeat an earlier pass's work, the analytic level timing them once and "
+          "counting them again; M passes of long shrinking families it interpolates between timed passes")
     if "stress-layers" in scenes:
         layers = [got["stress-layers", s] for s in schemes if "levels" in got["stress-layers", s]]
         peak = max((g["peak"] for g in layers), default=0)
@@ -271,7 +274,8 @@ def big(schemes, scene: str, full: bool, timeout: float, jobs: int) -> bool:
                 total += f["cpu"] + a["cpu"]
                 peak = max(peak, g["peak"])
                 note = (f"{a['cycles']:,} cycles" + (f", {a['repeated_passes']} repeated passes" if a.get(
-                    "repeated_passes") else "")) if a["status"] == "ok" else f"REFUSED: {a['error'][:80]}"
+                    "repeated_passes") else "") + (f", {a['interpolated_passes']} interpolated" if a.get(
+                    "interpolated_passes") else "")) if a["status"] == "ok" else f"REFUSED: {a['error'][:80]}"
                 ok &= a["status"] == "ok"
                 print(f"{scheme:<{W}}{f['cpu']:14.1f}{a['cpu']:12.1f}{f['wall'] + a['wall']:9.1f}"
                       f"{g['peak'] / 2**20:9,.0f}  {note}", flush=True)

@@ -35,14 +35,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpusim.hw.collector import collector_paused
 from gpusim.hw.core import SimtCore, flush_cycles
 from gpusim.hw.driver import pass_overhead_cycles
-from gpusim.hw.lower import PRODUCES, scoreboard_warps, split_by, submitted_triangles, thread_mapping
+from gpusim.hw.lower import PRODUCES, scoreboard_warps, submitted_triangles, thread_mapping
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_triangle_cycles
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
+from gpusim.hw.pass_schedule import TERMS, Schedule, interpolated, pass_families
+from gpusim.hw.placement import Aranges, StillIssuing, count_key, group_passes, thread_ids_of
 from gpusim.opplan import ThreadRange
 
 # the units an operation goes to from the core (analytic estimates report memory traffic as DRAM's)
@@ -76,20 +79,6 @@ def _union(parts: list) -> np.ndarray:
 
 
 WHOLE_GROUPS = 2      # lane information of whole groups kept from pass to pass (depth peeling's every-pass loads)
-
-
-def _thread_ids(plan, arange=np.arange) -> list[np.ndarray]:
-    """Each group's thread ids, made once: the groups over ``0..n-1`` share one ``arange`` (depth peeling's
-    groups over every fragment would make one per group and pass)."""
-    ranges: dict[int, np.ndarray] = {}
-    out = []
-    for g in plan.groups:
-        if isinstance(g.thread, ThreadRange):
-            n = len(g.thread)
-            out.append(ranges[n] if n in ranges else ranges.setdefault(n, arange(n)))
-        else:
-            out.append(g.thread_ids())
-    return out
 
 
 class _QuadMemo:
@@ -176,113 +165,6 @@ def _warp_sample(lanes: np.ndarray, ws: int, warps: int = 4096) -> np.ndarray:
     return lanes[idx[idx < len(lanes)]]
 
 
-def _expand_pass(g, n):
-    """(pass, lane index into g.thread, ops) per (pass, thread) of a group spanning passes."""
-    i, seq = g.expand_ops()
-    p = np.asarray(g.pass_of(i, seq), np.int64)
-    if len(i) == n > 1 and seq.strides[0] == 0 and 0 <= int(p.min()) and int(p.max()) < 2**15:
-        # an op per thread (i = 0..n-1): the keys are distinct, the lanes those of each pass in thread order
-        order = np.argsort(p.astype(np.int16), kind="stable")
-        return p[order], order, np.broadcast_to(np.ones(1, np.int64), (n,))
-    key = p * n + i
-    if len(key) > 1 and not (key[1:] >= key[:-1]).all():
-        # i ascends (thread order), so ordering by pass, ties kept, sorts the keys: a radix sort when the passes
-        # fit 16 bits
-        small = len(p) and 0 <= int(p.min()) and int(p.max()) < 2**15
-        key = key[np.argsort(p.astype(np.int16) if small else p, kind="stable")]
-    new = run_starts(key)
-    return key[new] // n, key[new] % n, np.diff(np.append(new, len(key)))
-
-
-class _StillIssuing:
-    """The threads of a ``seq_pass`` group that issue its op ``s``: those with more than ``s`` ops. Made when
-    the pass is reached (memory grows with the threads, not threads x passes); the sets are nested (fewer as
-    ``s`` grows), so two of one group with the same size are the same set."""
-
-    def __init__(self, count: np.ndarray, sizes: np.ndarray, s: int):
-        self.count, self.sizes, self.s = count, sizes, s     # sizes[s]: threads with more than s ops
-
-    def size(self) -> int:
-        return int(self.sizes[self.s])
-
-    def __call__(self, nested: dict | None = None, recent: list = ()) -> np.ndarray:
-        """The threads; ``nested`` holds each count array's last set (``count_key``: its ``s``, the set, the set
-        it was picked from, the mask picking it), which holds this one when it was made for a smaller ``s``
-        (the next pass picks from the last pass's threads, not from all of them). ``recent``: other sorted sets
-        of threads made lately; the smallest holding as many of these threads as there are is picked from
-        instead (a pick of that many from it is these threads), and when it holds nothing else it is the set
-        (the R-buffer's writes back in one pass are the threads reading in the next)."""
-        key = count_key(self.count)
-        last = nested.get(key) if nested is not None else None
-        want = self.size()
-        sources = sorted((x for x in recent if len(x) >= want and int(x[-1]) < len(self.count)), key=len)[:1]
-        if last is not None and last[0] < self.s:
-            sources.append(last[1])
-        got = src = mask = None
-        for cand in sources:
-            m = self.count[cand] > self.s
-            k = int(np.count_nonzero(m))
-            if k == want:
-                src, mask, got = cand, m, cand if k == len(cand) else cand[m]
-                break
-        if got is None:
-            got = np.flatnonzero(self.count > self.s)
-        if nested is not None:
-            nested[key] = (self.s, got, src, mask)
-        return got
-
-
-def count_key(count: np.ndarray) -> tuple:
-    """One count array (a view of it alike) as a dict key."""
-    return count.__array_interface__["data"][0], count.shape, count.strides
-
-
-class _Aranges:
-    """``arange(n)`` for any ``n`` as a view of one array (the groups' lane indices would otherwise hold an
-    ``arange`` each: a multi-pass k-buffer's groups of every pass, gigabytes at tens of millions of fragments)."""
-
-    def __init__(self, n: int):
-        self.whole = np.arange(n, dtype=np.int64)
-
-    def __call__(self, n: int) -> np.ndarray:
-        return self.whole[:n] if n <= len(self.whole) else np.arange(n, dtype=np.int64)
-
-
-def _group_passes(g, arange=np.arange, counted: dict | None = None):
-    """Where group ``g``'s operations fall: (lane index into ``g.thread``, ops, {pass: selection}) with the
-    selection of each pass's lanes into the first two (None: all of them; a :class:`_StillIssuing` for a
-    ``seq_pass`` group whose threads issue different numbers of ops). ``counted`` keeps each count array's
-    (least, most, threads with more than s ops): the groups of one thread set across passes share theirs."""
-    n = len(g.thread)
-    if g.seq_pass is not None:          # op s of every thread in pass seq_pass[s]
-        count = g.count
-        key = count_key(count)
-        got = counted.get(key) if counted is not None else None
-        if got is None:
-            least, top = int(count.min()), int(count.max())
-            sizes = None if least == top else \
-                len(count) - np.cumsum(np.bincount(count, minlength=top + 1))[:top]   # no sort
-            got = (least, top, sizes)
-            if counted is not None:
-                counted[key] = got
-        least, top, sizes = got
-        if sizes is None:
-            where = {int(g.seq_pass[s]): None for s in range(top)}
-        else:
-            where = {int(g.seq_pass[s]): _StillIssuing(count, sizes, s) for s in range(top)}
-        return arange(n), np.broadcast_to(np.ones(1, np.int64), (n,)), where
-    if g.pass_fn is not None:
-        gp, li, cnt = _expand_pass(g, n)
-        return li, cnt, dict(split_by(gp))
-    if np.isscalar(g.pass_index):
-        return arange(n), g.count, {int(g.pass_index): None}
-    return arange(n), g.count, dict(split_by(np.asarray(g.pass_index, np.int64)))
-
-
-REPEAT_TOLERANCE = 0.01    # a pass whose groups each differ from a timed pass's by at most this share of their threads
-VOLUME_BOUNDS = ("issue", "raster", "dram", "atomic")   # bounds that grow with all of a pass's operations
-
-
 def _pass_packing(plan, groups: list[int], placement, p: int, work, gpu) -> _Packing:
     """Consecutive lanes, or the scoreboard dispatch's packing when a group of the pass goes through it: of every
     lane of the pass, as gpusim.hw.lower packs them (a multi-pass k-buffer's peel test runs on fragments that do
@@ -292,7 +174,7 @@ def _pass_packing(plan, groups: list[int], placement, p: int, work, gpu) -> _Pac
     lanes = []
     for gi in groups:
         sel = placement[gi][2][p]
-        sel = sel() if isinstance(sel, _StillIssuing) else sel
+        sel = sel() if isinstance(sel, StillIssuing) else sel
         threads = plan.groups[gi].thread_ids()
         lanes.append(threads if sel is None else threads[placement[gi][0][sel]])
     keys = np.unique(np.concatenate(lanes))
@@ -311,48 +193,6 @@ def _scoreboard_bound(held: list, keys: np.ndarray, wchain: np.ndarray, packing:
         pairs = np.unique(warp * (int(cells.max(initial=0)) + 1) + cells)      # (warp, cell) held
         worst = max(worst, float(wchain[pairs // (int(cells.max(initial=0)) + 1)].sum()) / entries)
     return worst
-
-
-def _pass_shape(pk, p: int, groups: list[int], placement, plan, bases) -> tuple[tuple, np.ndarray]:
-    """What decides a pass's analytic time: its kind and groups, and for a group whose threads there are a
-    subset of its own (one thread per fragment a pass blends) how many and at which addresses, all in the
-    key; and each ``seq_pass`` group's threads in it (-1: all of the group's). Depth peeling's passes once
-    one deep pixel is left, and the R-buffer's recirculations of one pixel, repeat nearly the same work
-    thousands of times."""
-    sizes, subsets = [], []
-    for gi in groups:
-        sel = placement[gi][2][p]
-        if sel is None:
-            sizes.append(-1)
-        elif isinstance(sel, _StillIssuing):
-            sizes.append(sel.size())
-        else:
-            g = plan.groups[gi]
-            lanes = placement[gi][0][sel]
-            where = (np.zeros(0) if g.is_compute else
-                     bases[g.structure] + np.asarray(g.offset(lanes, np.zeros(len(lanes), np.int64)), np.float64))
-            counts = np.asarray(g.instructions)[lanes] if g.is_compute else placement[gi][1][sel]
-            subsets.append((gi, len(sel), int(counts.sum()), float(where.sum()), float((where * where).sum())))
-    threads = sum(len(placement[gi][0]) if n < 0 else n for gi, n in zip(groups, sizes))
-    return ((pk.kind, pk.threads, pk.software, pk.primitives, tuple(groups), tuple(subsets)),
-            np.array(sizes, np.int64), threads)
-
-
-def _repeats(timed: dict, shape) -> int | None:
-    """An earlier timed pass with the same key each of whose groups has the same threads as in ``shape``, or
-    (a ``seq_pass`` group's nested sets, which only shrink) at most REPEAT_TOLERANCE more of them; or, when
-    a bound that grows with the whole pass's work decided that pass (VOLUME_BOUNDS), at most
-    REPEAT_TOLERANCE of its threads more in all."""
-    if shape[0] not in timed:
-        return None
-    q, sizes_q, threads_q, bound_q = timed[shape[0]]
-    sizes = shape[1]
-    if ((sizes < 0) != (sizes_q < 0)).any():
-        return None
-    more = np.abs(sizes - sizes_q)
-    if (more <= REPEAT_TOLERANCE * np.abs(sizes_q)).all():
-        return q
-    return q if bound_q in VOLUME_BOUNDS and more.sum() <= REPEAT_TOLERANCE * threads_q else None
 
 
 def _take(values: np.ndarray, idx) -> np.ndarray:
@@ -454,57 +294,64 @@ def _chain_on_range(adds: list):
     return chain[0] + present, chain[1][present]
 
 
-def analytic_timing(result, work, gpu) -> dict:
-    plan, bases = result.plan, result.bases()
-    c, m = gpu.core, gpu.memory
-    ws, cost = c.warp_size, c.op_issue_cycles
-    alu_cost = c.issue_cycles / c.alu_issue_width       # an ALU instruction of a warp (alu_issue_width a lane-cycle)
-    icn = m.interconnect_latency
-    lat = {MEM: 2 * icn + gpu.dram.latency + (gpu.l2.latency if gpu.l2.size_bytes else 0),
-           ATOMIC: 2 * icn + gpu.atomic.latency, ROP: 2 * icn + gpu.rop.latency, SCOREBOARD: 0}
-    segment = gpu.coalescer.segment_bytes
-    n_pass = len(plan.passes)
-    wis = np.zeros(n_pass)
-    alu = np.zeros(n_pass)                    # issue cycles of ALU work (compute groups)
-    dram_bytes = np.zeros(n_pass)
-    atomic_ops = np.zeros(n_pass)
-    hottest = np.zeros(n_pass)
-    rop_unit = np.zeros((n_pass, gpu.rop.units))
-    used: list[set] = [set() for _ in range(n_pass)]
-    # where each group's operations fall: per pass, the threads (None: all) issuing them
-    aranges = _Aranges(max((len(g.thread) for g in plan.groups), default=0))
-    counted: dict = {}
-    placement = [_group_passes(g, aranges, counted) for g in plan.groups]
-    ids = _thread_ids(plan, aranges)
-    groups_of_pass: list[list[int]] = [[] for _ in range(n_pass)]
-    for gi, (_, _, where) in enumerate(placement):
-        for p in where:
-            groups_of_pass[p].append(gi)
-    passes, total = [], 0
-    overhead = pass_overhead_cycles(gpu)      # the driver issues each pass
-    quad_memo = _QuadMemo()                   # passes over the same fragments (depth peeling's) share their quads
-    timed: dict[tuple, tuple] = {}            # a pass's key -> the last pass timed with it, its groups' threads
-    whole_groups: list = []                   # the last groups met whole: (threads, triangle mapping, lane info)
-    nested: dict = {}                         # each count array's threads still issuing, as the last pass had them
-    last_still: list = []                     # the threads still issuing of the last pass timed
-    sel_lanes: dict = {}                      # the last pass's lane info of threads still issuing, by their set
-    ascending: dict = {}                      # group -> whether its thread ids ascend
-    units_of: dict = {}                       # ROP group -> the unit of each of its threads' first address
-    for p, pk in enumerate(plan.passes):      # pass by pass: per-lane state lives for one pass only
+class _PassTimer:
+    """Times one pass at a time on the per-unit bounds, keeping what passes over the same threads share (lane
+    information, thread sets, quads); the per-pass figures (warp instructions, ALU cycles, DRAM bytes, atomic
+    operations, the hottest address, ROP service per unit, the units used) go into arrays over the passes."""
+
+    def __init__(self, result, work, gpu):
+        self.result, self.work, self.gpu = result, work, gpu
+        plan = self.plan = result.plan
+        self.bases = result.bases()
+        m = gpu.memory
+        icn = m.interconnect_latency
+        self.lat = {MEM: 2 * icn + gpu.dram.latency + (gpu.l2.latency if gpu.l2.size_bytes else 0),
+                    ATOMIC: 2 * icn + gpu.atomic.latency, ROP: 2 * icn + gpu.rop.latency, SCOREBOARD: 0}
+        n_pass = len(plan.passes)
+        self.wis = np.zeros(n_pass)
+        self.alu = np.zeros(n_pass)               # issue cycles of ALU work (compute groups)
+        self.dram_bytes = np.zeros(n_pass)
+        self.atomic_ops = np.zeros(n_pass)
+        self.hottest = np.zeros(n_pass)
+        self.rop_unit = np.zeros((n_pass, gpu.rop.units))
+        self.used: list[set] = [set() for _ in range(n_pass)]
+        # where each group's operations fall: per pass, the threads (None: all) issuing them
+        aranges = Aranges(max((len(g.thread) for g in plan.groups), default=0))
+        counted: dict = {}
+        self.placement = [group_passes(g, aranges, counted) for g in plan.groups]
+        self.ids = thread_ids_of(plan, aranges)
+        self.groups_of_pass: list[list[int]] = [[] for _ in range(n_pass)]
+        for gi, (_, _, where) in enumerate(self.placement):
+            for p in where:
+                self.groups_of_pass[p].append(gi)
+        self.overhead = pass_overhead_cycles(gpu)      # the driver issues each pass
+        self.quad_memo = _QuadMemo()           # passes over the same fragments (depth peeling's) share their quads
+        self.whole_groups: list = []           # the last groups met whole: (threads, triangle mapping, lane info)
+        self.nested: dict = {}                 # each count array's threads still issuing, as the last pass had them
+        self.last_still: list = []             # the threads still issuing of the last pass timed
+        self.sel_lanes: dict = {}              # the last pass's lane info of threads still issuing, by their set
+        self.ascending: dict = {}              # group -> whether its thread ids ascend
+        self.units_of: dict = {}               # ROP group -> the unit of each of its threads' first address
+
+    def per_pass(self) -> tuple:
+        return self.wis, self.alu, self.dram_bytes, self.atomic_ops, self.hottest, self.rop_unit
+
+    def time(self, p: int) -> dict:
+        """Pass ``p``'s record (name, kind, cycles, warps, the bound that decided it), its figures in the arrays."""
+        plan, bases, work, gpu = self.plan, self.bases, self.work, self.gpu
+        c, m = gpu.core, gpu.memory
+        ws, cost = c.warp_size, c.op_issue_cycles
+        alu_cost = c.issue_cycles / c.alu_issue_width   # an ALU instruction of a warp (alu_issue_width a lane-cycle)
+        segment = gpu.coalescer.segment_bytes
+        lat, overhead, placement, ids = self.lat, self.overhead, self.placement, self.ids
+        groups_of_pass, quad_memo, nested = self.groups_of_pass, self.quad_memo, self.nested
+        wis, alu, dram_bytes, atomic_ops, hottest, rop_unit = self.per_pass()
+        used, ascending, units_of = self.used, self.ascending, self.units_of
+        last_still, sel_lanes = self.last_still, self.sel_lanes
+        pk = plan.passes[p]
         if pk.kind == "flush":
-            cyc = flush_cycles(c, -(-work.width * work.height // ws)) + overhead
-            passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": 0, "bound": "flush"})
-            total += cyc
-            continue
-        shape = _pass_shape(pk, p, groups_of_pass[p], placement, plan, bases)
-        q = _repeats(timed, shape)
-        if q is not None:                     # (nearly) the same work as an earlier pass: timed once, counted again
-            for per_pass in (wis, alu, dram_bytes, atomic_ops, hottest, rop_unit):
-                per_pass[p] = per_pass[q]
-            used[p] = used[q]
-            passes.append(passes[q] | {"name": pk.name, "repeat_of": q})
-            total += passes[q]["cycles"]
-            continue
+            return {"name": pk.name, "kind": pk.kind, "bound": "flush", "warps": 0,
+                    "cycles": flush_cycles(c, -(-work.width * work.height // ws)) + overhead}
         last_producer, waited = None, False
         adds: list = []                       # each group's lane info, dependent-chain cycles per lane, threads
         pass_keys: list = []                  # the lane keys of each group in the pass
@@ -517,13 +364,13 @@ def analytic_timing(result, work, gpu) -> dict:
                                               #   whether each lane runs one thread))]
         triangles = thread_mapping(gpu, pk) == "triangle"
         if packing.warp is None:              # a whole group's lanes, as the last passes over it had them
-            lane_cache = [(th, None, v) for th, tri, v in whole_groups if tri == triangles]
+            lane_cache = [(th, None, v) for th, tri, v in self.whole_groups if tri == triangles]
         for gi in groups_of_pass[p]:          # in program order
             g = plan.groups[gi]
             li, cnt, where = placement[gi]
             sel = where[p]
             memo = issuing = None
-            if isinstance(sel, _StillIssuing):   # groups over one count array (views of it) share the threads
+            if isinstance(sel, StillIssuing):   # groups over one count array (views of it) share the threads
                 issuing = sel
                 memo = (*count_key(sel.count), sel.s)
                 sel = still[memo] if memo in still else still.setdefault(memo, sel(nested, [*still.values(),
@@ -541,7 +388,7 @@ def analytic_timing(result, work, gpu) -> dict:
             nb = g.bytes if not callable(g.bytes) else None
             if sel is None:
                 lanes_sel, counts = li, cnt
-            elif g.seq_pass is not None:          # lanes 0..n-1, an operation each (_group_passes)
+            elif g.seq_pass is not None:          # lanes 0..n-1, an operation each (group_passes)
                 lanes_sel, counts = sel, cnt[:len(sel)]
             else:
                 lanes_sel, counts = li[sel], _take(cnt, sel)
@@ -584,7 +431,7 @@ def analytic_timing(result, work, gpu) -> dict:
                 got = (lanes, lo, size, threads_in, present, warp_threads, keys, distinct)
                 cached.append((thread, memo, got))
                 if sel is None and packing.warp is None:
-                    whole_groups = [(thread, triangles, got)] + whole_groups[:WHOLE_GROUPS - 1]
+                    self.whole_groups = [(thread, triangles, got)] + self.whole_groups[:WHOLE_GROUPS - 1]
             if memo is not None and packing.warp is None:
                 made_lanes[id(sel)] = (sel, thread, triangles, got)
             lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
@@ -665,11 +512,9 @@ def analytic_timing(result, work, gpu) -> dict:
                 last_producer, waited = cls, False
             elif g.dep:
                 waited = True
-        last_still, sel_lanes = list(still.values()), made_lanes
+        self.last_still, self.sel_lanes = list(still.values()), made_lanes
         if not adds:
-            passes.append({"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"})
-            total += overhead
-            continue
+            return {"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"}
         chain = _chain_on_lanes(adds, nested)
         chain_keys, lane_chain = chain if chain is not None else _chain_on_range(adds)
         del adds, chain
@@ -710,12 +555,57 @@ def analytic_timing(result, work, gpu) -> dict:
             bounds["dram"] = dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions)
             used[p].add(MEM)
         limit = max(bounds, key=bounds.get)
-        cyc = int(np.ceil(bounds[limit])) + max(lat[u] for u in used[p]) + overhead
-        passes.append({"name": pk.name, "kind": pk.kind, "cycles": cyc, "warps": n_warps, "bound": limit})
-        total += cyc
-        timed[shape[0]] = (p, shape[1], shape[2], limit)
+        extra = max(lat[u] for u in used[p]) + overhead
+        return {"name": pk.name, "kind": pk.kind, "cycles": int(np.ceil(bounds[limit])) + extra, "warps": n_warps,
+                "bound": limit, TERMS: ({k: float(v) for k, v in bounds.items()}, extra)}
+
+
+def analytic_timing(result, work, gpu, interpolate: bool = True) -> dict:
+    """The analytic level's record of a run: per pass the bound that decided it; passes alike in their work timed
+    once and counted again, or (``interpolate``) a long family's shrinking passes interpolated between timed ones
+    (gpusim.hw.pass_schedule)."""
+    with collector_paused():
+        return _analytic_timing(result, work, gpu, interpolate)
+
+
+def _analytic_timing(result, work, gpu, interpolate: bool) -> dict:
+    timer = _PassTimer(result, work, gpu)
+    plan, m = timer.plan, gpu.memory
+    fam_of, families = pass_families(plan, timer.placement, timer.groups_of_pass, timer.bases, timer.ids)
+    schedule = Schedule(families, timer.time, interpolate)
+    arrays = timer.per_pass()
+    used = timer.used
+    passes = []
+    copy_to, copy_from, mix = [], [], []        # repeats' figures are their pass's; interpolated ones between two
+    for p, pk in enumerate(plan.passes):
+        if fam_of[p] < 0:
+            passes.append(timer.time(p))
+            continue
+        how = schedule.how[p]
+        if how[0] == "timed":
+            passes.append(schedule.records[p])
+        elif how[0] == "repeat":
+            q = how[1]
+            copy_to.append(p)
+            copy_from.append(q)
+            used[p] = used[q]
+            passes.append(schedule.records[q] | {"name": pk.name, "repeat_of": q})
+        else:
+            _, a, b, w = how
+            mix.append((p, a, b, w))
+            used[p] = used[a] | used[b]
+            passes.append(interpolated(schedule.records[a], schedule.records[b], a, b, w) | {"name": pk.name})
+    for arr in arrays:
+        arr[copy_to] = arr[copy_from]
+        for p, a, b, w in mix:
+            arr[p] = arr[a] + w * (arr[b] - arr[a])
+    for x in passes:
+        x.pop(TERMS, None)
+    total = sum(x["cycles"] for x in passes)
+    wis, _, dram_bytes, atomic_ops, _, rop_unit = arrays
+    every = set().union(*used)
     units_built = [name for name, cls in (("dram", MEM), ("atomic", ATOMIC), ("rop", ROP), ("scoreboard", SCOREBOARD))
-                   if any(cls in u for u in used)]
+                   if cls in every]
     busy = {"dram": dram_bytes.sum() / gpu.dram.bytes_per_cycle, "atomic": atomic_ops.sum() / gpu.atomic.ops_per_cycle,
             "rop": rop_unit.sum()}
     inst = {"dram": m.partitions, "atomic": m.partitions, "rop": gpu.rop.units}
@@ -724,4 +614,5 @@ def analytic_timing(result, work, gpu) -> dict:
     return {"fidelity": "analytic", "gpu": gpu.name, "instructions": int(wis.sum()),
             "operations": int(plan.total_ops()), "passes": passes, "units_built": units_built, "units": units,
             "rmw_hazards": None, "total": int(total),
-            "repeated_passes": sum("repeat_of" in x for x in passes)}
+            "repeated_passes": sum("repeat_of" in x for x in passes),
+            "interpolated_passes": sum("interpolated" in x for x in passes)}

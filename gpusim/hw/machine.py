@@ -23,7 +23,6 @@ the run.
 
 from __future__ import annotations
 
-import gc
 import sys
 import weakref
 from heapq import heappush
@@ -34,6 +33,7 @@ from simpy.events import Event
 
 from gpusim.errors import GpusimError
 from gpusim.hw import gpu as _gpu  # noqa: F401  (registers every unit)
+from gpusim.hw.collector import collector_paused
 from gpusim.hw.driver import pass_overhead_cycles
 from gpusim.hw.memory import MemoryLevel
 from gpusim.hw.parallel import plan_shares, run_shares
@@ -129,9 +129,7 @@ class Machine:
         would trigger a collection every few hundred (a fifth of the run time);
         it is restored on the way out.
         """
-        collecting = gc.isenabled()
-        gc.disable()
-        try:
+        with collector_paused():
             shares = plan_shares(self)
             if len(shares) > 1 and run_shares(self, shares):
                 if self.progress is not None:
@@ -140,9 +138,6 @@ class Machine:
                 return self.now
             self.pass_cycles = [c for _, c in self.run_share(range(len(self.program.passes)))]
             return self.now
-        finally:
-            if collecting:
-                gc.enable()
 
     def run_share(self, indices) -> list[tuple[int, int]]:
         """Simulate the passes ``indices`` (ascending) one after the other from the current cycle; each one's
