@@ -138,3 +138,24 @@ def test_a_sampled_run_over_max_operations_refuses_before_building_anything(monk
     with pytest.raises(GpusimError, match=r"^the run would lower [\d,]+ operations.*--fidelity analytic") as e:
         run_timing(result, trace, "sampled", gpu, reference)
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("scheme", ["kbuffer", "linked-list", "depth-peeling"])
+def test_a_sample_that_keeps_all_the_work_runs_on_the_whole_gpu(scheme):
+    """Every fragment on one pixel: each replicate keeps that pixel's tile, all of the graphics pipeline's work,
+    so it runs on every SM and gives the full level's cycles (it ran on 1/32 of them, 6.8x the full level's
+    k-buffer capture, with an interval of zero width). (A software rasterizer's triangle blocks are still a
+    share of the work.)"""
+    from extremes import one_pixel
+    trace = one_pixel(2_000)
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    full = replay(trace, scheme, {}, "full", gpu)[1]["timing"]
+    sampled = replay(trace, scheme, {}, "sampled", gpu)[1]["timing"]
+    assert sampled["sample"]["replicate_sms"] == [gpu.core.sms] * gpu.sample.replicates
+    assert sampled["cycles"] == full["cycles"]
+
+
+def test_a_sample_of_its_share_of_the_work_runs_on_its_share_of_the_sms(spheres):
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    rec = replay(spheres, "freepipe-abuffer", {}, "sampled", gpu)[1]["timing"]
+    assert set(rec["sample"]["replicate_sms"]) <= {sampled_sms(gpu), sampled_sms(gpu) + 1}

@@ -95,6 +95,17 @@ def sampled_sms(gpu) -> int:
     return max(1, min(gpu.core.sms, round(gpu.sample.fraction * gpu.core.sms)))
 
 
+def replicate_sms(gpu, program: Program) -> int:
+    """SMs for a replicate whose lowered ``program`` keeps a share of the run's operations: that share of the
+    GPU's SMs (a sample that keeps more than ``sample.fraction`` of the work, as one of a trace whose fragments
+    lie in fewer tiles than the sample has strata, runs on as much more of the GPU; all of it, the run itself)."""
+    kept = sum(p.operations for p in program.passes)
+    total = sum(p.operations_total for p in program.passes)
+    if not total:
+        return sampled_sms(gpu)
+    return max(sampled_sms(gpu), min(gpu.core.sms, round(kept / total * gpu.core.sms)))
+
+
 def scaled_gpu(gpu, sms: int):
     """``gpu`` cut down to ``sms`` of its SMs: the quad rasterizer's rate, the L2 slices' lines, the scoreboard's
     cells and the atomic units' rate in the same share (the other units' share is ``Program.share``)."""
@@ -305,14 +316,24 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     rmw_all = rmw_threads(work.plan, work)
     pieces = plan_pieces(work)
     runs: list[dict] = []
+    machines: list[int] = []
     for r in range(reps.count):
         if share >= 1 and runs:              # every replicate is the whole run: the same figures
             runs.append(runs[0])
+            machines.append(sms)
             continue
-        program = dataclasses.replace(lower(work, small, Keep(reps, r), pieces=pieces), front_end_cycles=front)
+        keep = Keep(reps, r)
+        mine, machine = sms, small
+        program = lower(work, machine, keep, pieces=pieces)
+        fit = replicate_sms(gpu, program)    # the share of the GPU the kept work takes
+        if fit != mine:
+            mine, machine = fit, scaled_gpu(gpu, fit)
+            program = lower(work, machine, keep, pieces=pieces)
+        program = dataclasses.replace(program, front_end_cycles=front)
         for pp in program.passes:        # a flush's full-screen quad: each SM its share of the GPU's warps
-            pp.flush_warps = -(-pp.flush_warps // gpu.core.sms) * sms
-        runs.append(_replicate(work, small, program, rmw_all))
+            pp.flush_warps = -(-pp.flush_warps // gpu.core.sms) * mine
+        runs.append(_replicate(work, machine, program, rmw_all))
+        machines.append(mine)
     n = len(runs)
     per_pass = np.array([run["cycles"] for run in runs], np.float64)       # (replicates, passes)
     totals = per_pass.sum(axis=1)
@@ -336,7 +357,8 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     rec["cycles_std_error"] = se
     rec["cycle_error_estimate"] = se / mean if mean else 0.0
     rec["sample"] = {"tile": gpu.sample.tile, "fraction": gpu.sample.fraction, "seed": gpu.sample.seed,
-                     "replicates": n, "sms": sms, "share": share, "t_quantile": t, **reps.info,
+                     "replicates": n, "sms": sms, "replicate_sms": machines, "share": share, "t_quantile": t,
+                     **reps.info,
                      "operations_sampled": [int(run["operations_sampled"]) for run in runs],
                      "replicate_cycles": [int(x) for x in totals]}
     rec["event_seconds"] = time.perf_counter() - start
