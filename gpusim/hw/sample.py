@@ -3,8 +3,10 @@
 The method, its assumptions and its measured error are in docs/timing-model.md ("The sampled level").
 
 * The machine. A replicate runs ``m = max(1, round(sample.fraction x core.sms))``
-  SMs, a share ``s = m / core.sms`` of the GPU, on a share ``s`` of the work.
-  The SMs are whole (each with the GPU's warp slots and lanes: latency hiding
+  SMs, a share ``s = m / core.sms`` of the GPU, on a share ``s`` of the work (a
+  replicate that keeps more of the work, as one of a trace whose fragments lie in
+  fewer tiles than the sample has strata, runs on as large a share of the SMs:
+  :func:`replicate_sms`). The SMs are whole (each with the GPU's warp slots and lanes: latency hiding
   per SM as in the run). Every other unit keeps all its instances (memory
   partitions, atomic units, ROPs: the same address interleaving, so the same
   hot partitions) and its latencies, and a request occupies it ``1/s`` as long
