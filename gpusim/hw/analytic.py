@@ -9,11 +9,16 @@ largest of
   issues in the group, so divergence counts) x issue cycles, plus ALU work
   (compute groups: the busiest lane's instructions per warp), over the SMs;
 * latency: each lane's dependent chain (an operation that waits for a result
-  adds that unit's round trip), the slowest warp, or the SM's warps' chains
-  divided by the resident warps that hide each other;
-* dram: requests (lanes of a warp on one ``coalescer.segment_bytes`` segment, as
-  at the first operation of each lane, measured on up to 4,096 warps spread
-  evenly over the group) x bytes, over all channels;
+  adds that unit's round trip; a memory operation also its warp instruction's
+  requests on its busiest partition, served back to back), the slowest warp, or
+  the SM's warps' chains divided by the resident warps that hide each other;
+* dram: requests (lanes of a warp instruction on one ``coalescer.segment_bytes``
+  segment, an access over a segment boundary on two, measured on every
+  operation of the lanes of a sample of warps in runs spread over the group)
+  x bytes, over all channels; with an L2, only its misses (and the dirty lines
+  they evict);
+* l2: with an L2, every request's bytes through the slices (see
+  :class:`_L2Model` for its hits);
 * atomic: operations over all atomic units, and the hottest address
   (operations on one word serialize at ``same_address_cycles``);
 * rop: ROP service cycles of the busiest unit;
@@ -23,12 +28,10 @@ largest of
   rasterizer's vertex loads, setup and bounding-box scan on the SMs (triangle
   mapping, in the issue and dram bounds);
 
-plus one round trip of the slowest unit the pass uses and the driver's
-``driver.pass_us``. Imbalance across
-partitions beyond the hottest address, queueing and L2 hits are not modelled
-(the L2, when present, is assumed to catch re-use: DRAM bytes are those of the
-first touch). These are estimates: ``gpusim`` reports them beside the full
-model in the fidelity report.
+plus one round trip of the slowest unit the pass uses (a memory request's at
+the pass's L2 miss ratio) and the driver's ``driver.pass_us``. Imbalance across
+partitions beyond the hottest address and queueing are not modelled. These are
+estimates: ``gpusim`` reports them beside the full model in the fidelity report.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from gpusim.hw.core import SimtCore, flush_cycles
 from gpusim.hw.driver import pass_overhead_cycles
 from gpusim.hw.lower import PRODUCES, scoreboard_warps, submitted_triangles, thread_mapping
 from gpusim.hw.memory import SECTOR
+from gpusim.hw.memory.coalescer import WRITE_OPS
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_triangle_cycles
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import address_ids, entry_unit, interleave
@@ -111,6 +115,12 @@ def _distinct(a: np.ndarray) -> int:
     return int(np.count_nonzero(a[1:] != a[:-1])) + 1 if len(a) else 0
 
 
+def _sorted_distinct(a: np.ndarray) -> np.ndarray:
+    """The distinct values of ``a``, ascending (a sort: numpy's hashing ``unique`` is slower)."""
+    a = np.sort(a)
+    return a[np.r_[True, a[1:] != a[:-1]]] if len(a) else a
+
+
 def _hottest(addr: np.ndarray) -> int:
     """Most operations on one address."""
     ops = address_ids(addr)[1]
@@ -155,14 +165,43 @@ class _Packing:
         return (np.cumsum(starts) - 1)[pos]
 
 
-def _warp_sample(lanes: np.ndarray, ws: int, warps: int = 4096) -> np.ndarray:
-    """The lanes of at most ``warps`` warps spread evenly over ``lanes`` (all of them when fewer)."""
-    n_warps = -(-len(lanes) // ws)
+SEG_MASK = (1 << 36) - 1  # a request key's segment (below its warp instruction)
+OP_SAMPLE = 1 << 17      # operations a memory group's coalescing and L2 sample holds at most (about)
+
+
+def _op_sample(lanes: np.ndarray, counts: np.ndarray, ws: int, every: bool) -> tuple:
+    """A spread sample of a group's operations: (thread index, operation number, the warp of its lane among the
+    group's) of the first operation of the lanes of at most 4,096 warps, or (``every``) of all the operations of the
+    lanes of as many warps as hold about :data:`OP_SAMPLE` of them (16 at least); the warps in
+    :data:`SAMPLE_BLOCKS` runs of consecutive warps spread evenly over ``lanes`` (a run keeps the re-use of lines
+    between neighbouring warps)."""
+    n = len(lanes)
+    c0, uniform = _uniform(counts)
+    if not every or (uniform and c0 <= 1):
+        pos = _warp_positions(n, ws, 4096)
+        return lanes[pos], np.broadcast_to(np.zeros(1, np.int64), pos.shape), pos // ws
+    mean = -(-int(counts.sum()) // max(1, n))
+    pos = _warp_positions(n, ws, int(np.clip(OP_SAMPLE // (ws * max(1, mean)), 16, 4096)))
+    c = np.asarray(_take(counts, pos), np.int64)
+    rank = np.repeat(np.arange(len(pos)), c)
+    first = np.cumsum(c) - c
+    return lanes[pos][rank], np.arange(len(rank), dtype=np.int64) - first[rank], pos[rank] // ws
+
+
+SAMPLE_BLOCKS = 16       # runs of consecutive warps a group's sample is taken in
+
+
+def _warp_positions(n: int, ws: int, warps: int) -> np.ndarray:
+    """Positions of the lanes of at most ``warps`` warps of ``n`` lanes (all when fewer): :data:`SAMPLE_BLOCKS`
+    runs of consecutive warps spread evenly."""
+    n_warps = -(-n // ws)
     if n_warps <= warps:
-        return lanes
-    first = np.linspace(0, n_warps - 1, warps).astype(np.int64) * ws
-    idx = (first[:, None] + np.arange(ws)).ravel()
-    return lanes[idx[idx < len(lanes)]]
+        return np.arange(n)
+    run = max(1, warps // SAMPLE_BLOCKS)
+    first = np.linspace(0, n_warps - run, SAMPLE_BLOCKS).astype(np.int64)
+    w = np.unique((first[:, None] + np.arange(run)).ravel())
+    idx = (w[:, None] * ws + np.arange(ws)).ravel()
+    return idx[idx < n]
 
 
 def _pass_packing(plan, groups: list[int], placement, p: int, work, gpu) -> _Packing:
@@ -294,6 +333,204 @@ def _chain_on_range(adds: list):
     return chain[0] + present, chain[1][present]
 
 
+class _L2Model:
+    """What an L2 (``l2.size_bytes`` per partition, write-allocate, LRU, its contents carried from pass to pass)
+    catches of a pass's requests, from static counts only (a pass's time must not depend on which passes were
+    timed before it). Its capacity is that of the sets its partition's lines reach (:func:`_usable_sets`). A line
+    a pass touches first misses if no earlier pass touched its structure, and otherwise is still there when the
+    lines every pass so far touched fit (a share ``capacity / footprint`` of them otherwise); a line touched again
+    in the pass hits when the lines touched in between fit (:meth:`_L2Pass.misses`). A miss after the L2 has
+    filled evicts a line, one line more to the DRAM when that line was written. A hit's round trip is the L2's, a
+    miss's adds the DRAM's; only misses reach the DRAM (the request's bytes); every request holds its slice for
+    its bytes."""
+
+    def __init__(self, plan, result, placement, groups_of_pass, gpu, work):
+        self.present = gpu.l2.size_bytes > 0
+        m = gpu.memory
+        self.hit_lat = 2 * m.interconnect_latency + gpu.dram.latency
+        self.dram_lat = 0
+        self.vertex_bytes = gpu.raster.vertex_bytes
+        self.dram_rate, self.l2_rate = gpu.dram.bytes_per_cycle, gpu.l2.bytes_per_cycle
+        if not self.present:
+            return
+        self.hit_lat, self.dram_lat = 2 * m.interconnect_latency + gpu.l2.latency, gpu.dram.latency
+        line = self.line = gpu.l2.line_bytes
+        self.capacity = _usable_sets(gpu) * gpu.l2.ways * m.partitions       # lines
+        self.resident = gpu.core.sms * gpu.core.warps_per_sm           # warps running at once
+        structures = getattr(result, "structures", None)
+        if structures is not None:
+            alloc = {s.name: -(-s.allocated_bytes // line) for s in structures}
+        else:                                   # only the layout: a structure reaches the next one's base
+            bases = sorted(result.bases().items(), key=lambda kv: kv[1])
+            alloc = {a: -(-(b - x) // line) for (a, x), (_, b) in zip(bases, bases[1:])}
+        ops: dict = {}
+        first: dict = {}
+        n_pass = len(plan.passes)
+        in_pass = [set() for _ in range(n_pass)]
+        for p, gis in enumerate(groups_of_pass):
+            for gi in gis:
+                g = plan.groups[gi]
+                if g.is_compute or entry_unit(g.op) != MEM:
+                    continue
+                in_pass[p].add(g.structure)
+                first.setdefault(g.structure, p)
+        for g in plan.groups:
+            if not g.is_compute and entry_unit(g.op) == MEM:
+                ops[g.structure] = ops.get(g.structure, 0) + int(g.total)
+        # a structure's lines: those it allocates, at most one per operation on it
+        self.lines = {s: max(1, min(alloc.get(s, ops[s]), ops[s])) for s in ops}
+        software = [p for p, pk in enumerate(plan.passes) if thread_mapping(gpu, pk) == "triangle"]
+        self.vertex_first = software[0] if software else -1
+        vertex_lines = -(-work.triangles * (INDEX_BYTES + 3 * gpu.raster.vertex_bytes) // line)
+        # lines every pass up to p touched, and each pass's own
+        footprint = np.zeros(n_pass)
+        for s, p in first.items():
+            footprint[p] += self.lines[s]
+        if software:
+            footprint[self.vertex_first] += vertex_lines
+        self.footprint = np.cumsum(footprint)
+        self.own = np.array([sum(self.lines[s] for s in ss) + (vertex_lines if p in software else 0)
+                             for p, ss in enumerate(in_pass)], np.float64)
+        self.first = first
+        # dirty lines: those of structures a pass up to p writes
+        written = np.zeros(n_pass)
+        firsts_w: dict = {}
+        for p, gis in enumerate(groups_of_pass):
+            for gi in gis:
+                g = plan.groups[gi]
+                if not g.is_compute and g.op in WRITE_OPS:
+                    firsts_w.setdefault(g.structure, p)
+        for s, p in firsts_w.items():
+            written[p] += self.lines[s]
+        self.written = np.cumsum(written)
+
+    def evicting(self, p: int) -> float:
+        """The share of pass ``p``'s misses that evict a dirty line (one line more to the DRAM): those after the
+        L2 has filled with the lines of the passes so far, times the share of those lines written."""
+        before, after = (self.footprint[p - 1] if p else 0.0), self.footprint[p]
+        if after <= self.capacity:
+            return 0.0
+        full = 1.0 if before >= self.capacity else (after - self.capacity) / (after - before)
+        return full * self.written[p] / after
+
+    def pass_state(self, p: int) -> "_L2Pass":
+        return _L2Pass(self, p)
+
+    def service(self, nbytes: float, miss: float) -> float:
+        """Cycles a partition serves a request of ``nbytes`` that misses the L2 with probability ``miss``: its
+        slice's, then the DRAM's on a miss (the DRAM's alone without an L2)."""
+        if not self.present:
+            return nbytes / self.dram_rate
+        return nbytes / self.l2_rate + miss * nbytes / self.dram_rate
+
+    def latency(self, miss: float) -> float:
+        """The round trip of a memory request that misses the L2 with probability ``miss``."""
+        return self.hit_lat + miss * self.dram_lat
+
+    def kept(self, p: int) -> float:
+        """The share of lines an earlier pass left that pass ``p`` still finds."""
+        return min(1.0, self.capacity / self.footprint[p]) if self.footprint[p] else 1.0
+
+    def again(self, p: int) -> float:
+        """The share of the lines pass ``p`` touched that are still there when it touches them again."""
+        return min(1.0, self.capacity / self.own[p]) if self.own[p] else 1.0
+
+
+def _usable_sets(gpu) -> int:
+    """Sets of an L2 slice that the lines of its partition fall in: a slice serves every ``memory.partitions``-th
+    block of ``memory.interleave_bytes``, and a line's set is its line number modulo the sets, so the partition's
+    lines may reach only some of them (16 partitions of 256-byte blocks and 128-byte lines: 2 lines of every 32,
+    a sixteenth of 1,600 sets)."""
+    m, l2 = gpu.memory, gpu.l2
+    sets = l2.size_bytes // (l2.line_bytes * l2.ways)
+    period = sets * m.partitions * max(1, -(-m.interleave_bytes // l2.line_bytes))     # lines, a whole cycle
+    line = np.arange(period, dtype=np.int64)
+    mine = line[interleave(line * l2.line_bytes, m.interleave_bytes, m.partitions) == 0]
+    return max(1, len(_sorted_distinct(mine % sets)))
+
+
+class _L2Pass:
+    """One pass's L2 requests and misses (all misses without an L2)."""
+
+    def __init__(self, model: _L2Model, p: int):
+        self.model, self.p = model, p
+        self.seen: dict = {}                      # structure -> its lines touched so far in the pass
+        self.threads: dict = {}                   # structure -> the threads of the pass's groups on it so far
+        self.requests = self.missed = 0.0         # bytes requested, bytes that missed
+
+    def misses(self, structure: str, threads, ops: float, requests: float, nbytes: float, addr: np.ndarray,
+               warp: np.ndarray, seq: np.ndarray, warps: int, at: int) -> tuple[float, float]:
+        """A memory group's DRAM bytes per request and the share of its ``requests`` (of ``nbytes`` each) that miss.
+        ``ops`` operations on ``structure`` by ``threads`` (their ids and selection in the pass) in ``warps`` warps,
+        from the warps' instruction ``at`` on; ``addr``: the addresses of a sample of them, ``warp`` the warp (in
+        the group's order) and ``seq`` the operation number of each.
+
+        Warps run in waves of the resident ones, each wave's warps an instruction at a time together, so between
+        two touches of a line the L2 sees the lines of the warp instructions issued in between (LRU's reuse
+        distance); a touch finds its line when those fit. In the sample, a line's first touch is a line the pass
+        brings in (a line its threads touched in an earlier group of the pass, when still there, hits); the
+        sample's counts stand for the group's (times its operations over the sample's)."""
+        m = self.model
+        if not m.present:
+            self._count(requests * nbytes, 1.0)
+            return nbytes, 1.0
+        wave = max(1, min(warps, m.resident))
+        steps = int(seq.max(initial=0)) + 1
+        clock = (warp // wave) * wave * steps + seq * wave + warp % wave     # the order warp instructions issue in
+        lines = addr // m.line
+        lines -= lines.min(initial=0)
+        span = int(clock.max(initial=0)) + 1
+        if int(lines.max(initial=0)) < (1 << 62) // span:     # (line, clock) pairs in order, in one sort
+            key = np.sort(lines * span + clock)
+            ln, t = key // span, key % span
+        else:
+            order = np.lexsort((clock, lines))
+            ln, t = lines[order], clock[order]
+        again = np.r_[False, ln[1:] == ln[:-1]]
+        per_inst = _distinct((clock << 28) + (lines & ((1 << 28) - 1))) / max(1, _distinct(clock))
+        far = float(np.count_nonzero(again & (np.r_[0, np.diff(t)] * per_inst > m.capacity)))
+        scale = ops / max(1, len(addr))
+        first = float(len(ln) - np.count_nonzero(again)) * scale
+        mine = self.threads.setdefault(structure, [])
+        th, sel = threads
+        before = next((a for t_, s_, a in mine if (t_ is th or (len(t_) == len(th) and np.array_equal(t_, th)))
+                       and s_ is sel), None)
+        if before is None:
+            mine.append((th, sel, at))
+        total = m.lines[structure]
+        seen = self.seen.get(structure, 0.0)
+        if before is not None:           # the same threads again: their own lines, brought in ``at - before`` ago
+            if (at - before) * wave * per_inst <= m.capacity:
+                first = 0.0
+            new = 0.0
+        else:
+            new = max(0.0, min(seen + first, total) - seen)
+            self.seen[structure] = seen + new
+        cold = 1.0 if m.first[structure] >= self.p else 1.0 - m.kept(self.p)
+        # first touches beyond the structure's lines are lines other warps touched (the sample's gaps hide when)
+        missed = new * cold + far * scale + (first - new) * (1.0 - m.again(self.p))
+        miss = min(1.0, missed / requests) if requests else 0.0
+        self._count(requests * nbytes, miss)
+        return miss * (nbytes + m.evicting(self.p) * m.line), miss
+
+    def _count(self, nbytes: float, miss: float) -> float:
+        self.requests += nbytes
+        self.missed += nbytes * miss
+        return miss
+
+    def vertex_misses(self, triangles: int) -> float:
+        """The share of a software rasterizer's vertex and index bytes that miss."""
+        m = self.model
+        if not m.present:
+            return 1.0
+        miss = 1.0 if m.vertex_first >= self.p else 1.0 - m.kept(self.p)
+        self._count(triangles * (INDEX_BYTES + 3 * m.vertex_bytes), miss)
+        return miss * (1.0 + m.evicting(self.p) * m.line / (INDEX_BYTES + 3 * m.vertex_bytes))
+
+    def miss_ratio(self) -> float:
+        return self.missed / self.requests if self.requests else (0.0 if self.model.present else 1.0)
+
+
 class _PassTimer:
     """Times one pass at a time on the per-unit bounds, keeping what passes over the same threads share (lane
     information, thread sets, quads); the per-pass figures (warp instructions, ALU cycles, DRAM bytes, atomic
@@ -310,7 +547,8 @@ class _PassTimer:
         n_pass = len(plan.passes)
         self.wis = np.zeros(n_pass)
         self.alu = np.zeros(n_pass)               # issue cycles of ALU work (compute groups)
-        self.dram_bytes = np.zeros(n_pass)
+        self.dram_bytes = np.zeros(n_pass)            # bytes the DRAM serves (with an L2: its misses)
+        self.l2_bytes = np.zeros(n_pass)              # bytes of every memory request (an L2 slice serves each)
         self.atomic_ops = np.zeros(n_pass)
         self.hottest = np.zeros(n_pass)
         self.rop_unit = np.zeros((n_pass, gpu.rop.units))
@@ -332,9 +570,10 @@ class _PassTimer:
         self.sel_lanes: dict = {}              # the last pass's lane info of threads still issuing, by their set
         self.ascending: dict = {}              # group -> whether its thread ids ascend
         self.units_of: dict = {}               # ROP group -> the unit of each of its threads' first address
+        self.l2 = _L2Model(plan, result, self.placement, self.groups_of_pass, gpu, work)
 
     def per_pass(self) -> tuple:
-        return self.wis, self.alu, self.dram_bytes, self.atomic_ops, self.hottest, self.rop_unit
+        return self.wis, self.alu, self.dram_bytes, self.atomic_ops, self.hottest, self.rop_unit, self.l2_bytes
 
     def time(self, p: int) -> dict:
         """Pass ``p``'s record (name, kind, cycles, warps, the bound that decided it), its figures in the arrays."""
@@ -345,7 +584,8 @@ class _PassTimer:
         segment = gpu.coalescer.segment_bytes
         lat, overhead, placement, ids = self.lat, self.overhead, self.placement, self.ids
         groups_of_pass, quad_memo, nested = self.groups_of_pass, self.quad_memo, self.nested
-        wis, alu, dram_bytes, atomic_ops, hottest, rop_unit = self.per_pass()
+        wis, alu, dram_bytes, atomic_ops, hottest, rop_unit, l2_bytes = self.per_pass()
+        l2 = self.l2.pass_state(p)           # the L2's lines touched so far in this pass, its requests and misses
         used, ascending, units_of = self.used, self.ascending, self.units_of
         last_still, sel_lanes = self.last_still, self.sel_lanes
         pk = plan.passes[p]
@@ -353,6 +593,7 @@ class _PassTimer:
             return {"name": pk.name, "kind": pk.kind, "bound": "flush", "warps": 0,
                     "cycles": flush_cycles(c, -(-work.width * work.height // ws)) + overhead}
         last_producer, waited = None, False
+        steps = 0                             # instructions a warp has issued before the group (the busiest lane's)
         adds: list = []                       # each group's lane info, dependent-chain cycles per lane, threads
         pass_keys: list = []                  # the lane keys of each group in the pass
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
@@ -450,25 +691,50 @@ class _PassTimer:
                 alu[p] += busiest * alu_cost
             else:
                 wis[p] += busiest
+            at, steps = steps, steps + (1 if compute else (c0 if uniform else int(counts.max(initial=0))))
             ops = float(c0 * len(counts) if uniform else counts.sum())
             # first operation of each thread: coalescing (on a spread sample of warps) and the hottest address
             # threads with no operation in this group have no address (a list walk of zero nodes)
             live = None if not len(counts) or (c0 if uniform else int(counts.min())) > 0 else counts > 0
             lanes_live = lanes_sel if live is None else lanes_sel[live]
             counts_live = counts if live is None else counts[live]
+            mem_lat = lat[MEM]
             if not len(lanes_live) or compute:
                 pass                             # no thread issues this group in this pass, or no memory
             elif cls == MEM:
-                sample = _warp_sample(lanes_live, ws)
-                zero = np.broadcast_to(np.zeros(1, np.int64), sample.shape)
-                addr = bases[g.structure] + np.asarray(g.offset(sample, zero), np.int64)
-                bytes_ = float(nb) if nb is not None else float(np.mean(g.bytes(sample, zero)))
+                # coalescing and the L2's lines on a spread sample of the group's operations (every operation of
+                # the sampled lanes: a thread's later operations may straddle segments its first does not)
+                i_s, seq_s, warp_s = _op_sample(lanes_live, counts_live, ws,
+                                                g.seq_pass is None and g.pass_fn is None)
+                addr = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
+                nb_s = nb if nb is not None else np.asarray(g.bytes(i_s, seq_s), np.int64)
+                bytes_ = float(nb) if nb is not None else float(np.mean(nb_s))
                 seg = addr // segment
-                wkey = ((np.arange(len(seg)) // ws) << 36) + seg
-                requests_per_lane = _distinct(wkey) / max(1, len(seg))
+                end = (addr + np.maximum(nb_s, 1) - 1) // segment
+                inst = warp_s * (int(seq_s.max(initial=0)) + 1) + seq_s    # the warp instruction of each
+                wkey = (inst << 36) + seg
+                wide = end > seg                        # an access over a segment boundary touches two
+                if wide.any():
+                    wkey = np.concatenate([wkey, (inst[wide] << 36) + end[wide]])
+                wkey = _sorted_distinct(wkey)           # the sample's requests
+                requests_per_lane = len(wkey) / max(1, len(seg))
+                # a warp instruction's requests to one partition are served back to back before its result is
+                # back: the busiest partition's requests of each instruction, on average
+                cell = (wkey >> 36) * m.partitions + interleave((wkey & SEG_MASK) * segment, m.interleave_bytes,
+                                                                m.partitions)
+                cell = np.sort(cell)
+                starts = run_starts(cell)
+                per_cell = np.diff(np.append(starts, len(cell)))
+                runs = run_starts(cell[starts] // m.partitions)
+                own = float(np.maximum.reduceat(per_cell, runs).mean()) if len(runs) else 0.0
                 req_bytes = min(max(segment, SECTOR),
                                 -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
-                dram_bytes[p] += ops * requests_per_lane * req_bytes
+                requests = ops * requests_per_lane
+                per_request, miss = l2.misses(g.structure, (thread, sel), ops, requests, req_bytes, addr, warp_s,
+                                              seq_s, -(-len(lanes_live) // ws), at)
+                l2_bytes[p] += requests * req_bytes
+                dram_bytes[p] += requests * per_request
+                mem_lat = self.l2.latency(miss) + own * self.l2.service(req_bytes, miss)
             elif cls == ROP and g.seq_pass is not None and len(placement[gi][2]) > 1:
                 addr = None
             else:
@@ -502,14 +768,15 @@ class _PassTimer:
             same = uniform and distinct
             add = (c0 if same else per_lane) * (alu_cost if compute else cost)
             lp = last_producer
+            unit_lat = mem_lat if cls == MEM else lat.get(cls, 0)
             if g.dep and produces:
-                add += (c0 if same else per_lane) * lat[cls]
+                add = add + (c0 if same else per_lane) * unit_lat
             elif g.dep and lp is not None and not waited:
-                add += (1 if same or threads_in is None else threads_in) * lat[lp]
+                add = add + (1 if same or threads_in is None else threads_in) * lp
             adds.append((got, add, (thread, issuing.count, issuing.s, sel) if known and issuing is not None
                          and g.seq_pass is not None else None))
             if produces:
-                last_producer, waited = cls, False
+                last_producer, waited = unit_lat, False
             elif g.dep:
                 waited = True
         self.last_still, self.sel_lanes = list(still.values()), made_lanes
@@ -551,11 +818,15 @@ class _PassTimer:
             setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * alu_cost
             sw_warps = -(-tris // ws)
             bounds["issue"] += (setup + 2 * sw_warps * cost) / min(c.sms, sw_warps)
-            dram_bytes[p] += tris * (INDEX_BYTES + 3 * r.vertex_bytes)
+            vertex_bytes = tris * (INDEX_BYTES + 3 * r.vertex_bytes)
+            l2_bytes[p] += vertex_bytes
+            dram_bytes[p] += vertex_bytes * l2.vertex_misses(tris)
             bounds["dram"] = dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions)
             used[p].add(MEM)
+        if self.l2.present:
+            bounds["l2"] = l2_bytes[p] / (gpu.l2.bytes_per_cycle * m.partitions)
         limit = max(bounds, key=bounds.get)
-        extra = max(lat[u] for u in used[p]) + overhead
+        extra = int(np.ceil(max(self.l2.latency(l2.miss_ratio()) if u == MEM else lat[u] for u in used[p]))) + overhead
         return {"name": pk.name, "kind": pk.kind, "cycles": int(np.ceil(bounds[limit])) + extra, "warps": n_warps,
                 "bound": limit, TERMS: ({k: float(v) for k, v in bounds.items()}, extra)}
 
@@ -602,7 +873,7 @@ def _analytic_timing(result, work, gpu, interpolate: bool) -> dict:
     for x in passes:
         x.pop(TERMS, None)
     total = sum(x["cycles"] for x in passes)
-    wis, _, dram_bytes, atomic_ops, _, rop_unit = arrays
+    wis, _, dram_bytes, atomic_ops, _, rop_unit, _ = arrays
     every = set().union(*used)
     units_built = [name for name, cls in (("dram", MEM), ("atomic", ATOMIC), ("rop", ROP), ("scoreboard", SCOREBOARD))
                    if cls in every]

@@ -1,0 +1,100 @@
+"""The analytic level's terms, each on a hand-computed small case where it decides, beside the full model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gpusim.hw import load_gpu
+from gpusim.hw.analytic import _PassTimer, _usable_sets, analytic_timing
+from gpusim.hw.lower import Workload, lower
+from gpusim.hw.machine import Machine
+from gpusim.opplan import OpPlan, Pass, layout_bases
+from gpusim.schemes.result import Structure
+
+from test_hw_units import SIMPLE
+
+# an L2 of 32 lines of 128 B (8 sets of 4 ways, every set reachable: one partition), 20 cycles a hit, 16 B/cycle
+L2 = ["l2.size_bytes=4096", "l2.line_bytes=128", "l2.ways=4", "l2.latency=20", "l2.bytes_per_cycle=16"]
+
+
+class _Result:
+    """What the analytic level reads from a scheme result: the plan, the structures and their layout."""
+
+    def __init__(self, plan, sizes):
+        self.plan, self.sizes = plan, sizes
+        self.structures = [Structure(name, 1, size, size, "") for name, size in sizes.items()]
+
+    def bases(self):
+        return layout_bases(self.plan.structures, self.sizes)
+
+
+def _both(plan, sizes, threads, extra=()):
+    """(full cycles, analytic record, each pass's analytic bounds and the cycles added to the largest)."""
+    gpu = load_gpu("gtx280", SIMPLE + list(extra))
+    result = _Result(plan, sizes)
+    work = Workload(plan, result.bases(), 64, 64, np.zeros(threads, np.int64), np.arange(threads), triangles=0)
+    full = Machine(gpu, lower(work, gpu), 64).run()
+    timer = _PassTimer(result, work, gpu)
+    return full, analytic_timing(result, work, gpu), [timer.time(p)["terms"] for p in range(len(plan.passes))]
+
+
+def _stream():
+    # 3,200 stores of 64 B at consecutive addresses: 6,400 requests of 32 B (two segments each), 1,600 lines
+    plan = OpPlan([Pass("stream", "fullscreen", "pixel")], ["a"])
+    plan.add(0, "store", "a", 3200, 1, lambda i, s: i * 64, 64)
+    return plan
+
+
+def test_every_request_holds_its_l2_slice():
+    # 204,800 B through one slice at 16 B/cycle: 12,800 cycles, slower than the DRAM's 32 B/cycle for the misses;
+    # plus the expected round trip: a quarter of the requests (a line's first) miss, 20 + 0.25 x 100 cycles
+    full, rec, terms = _both(_stream(), {"a": 3200 * 64}, 3200, L2)
+    (bounds, extra), = terms
+    assert rec["passes"][0]["bound"] == "l2" and bounds["l2"] == 12800
+    assert extra == 20 + 25 and rec["total"] == 12800 + 45
+    assert abs(rec["total"] / full - 1) < 0.01, (rec["total"], full)
+
+
+def test_a_miss_that_evicts_a_dirty_line_writes_it_back():
+    # the same stream through a fast slice: each of the 1,600 lines misses once (32 B to the DRAM), and once the
+    # 32 lines of the L2 are full (all written: dirty) each miss writes a 128 B line back, (1,600 - 32) of them
+    full, rec, terms = _both(_stream(), {"a": 3200 * 64}, 3200, L2 + ["l2.bytes_per_cycle=1000"])
+    (bounds, _), = terms
+    assert rec["passes"][0]["bound"] == "dram"
+    assert bounds["dram"] == pytest.approx((1600 * 32 + (1600 - 32) * 128) / 32)
+    assert abs(rec["total"] / full - 1) < 0.02, (rec["total"], full)
+
+
+def _store_then_chain():
+    # pass 0 stores 10 words per thread (lanes 40 B apart: a request each); pass 1 loads them back, each load
+    # waiting for the one before (a list walk)
+    plan = OpPlan([Pass("write", "fullscreen", "pixel"), Pass("walk", "fullscreen", "pixel")], ["a"])
+    plan.add(0, "store", "a", 32, 10, lambda i, s: (i * 10 + s) * 4, 4)
+    plan.add(1, "load", "a", 32, 10, lambda i, s: (i * 10 + s) * 4, 4, dep=True)
+    return plan
+
+
+def test_lines_an_earlier_pass_left_in_the_l2_hit():
+    # the 10 lines fit the L2, so every load of the walk hits: each waits 1 cycle of issue, its 32 requests on the
+    # one slice (32 B / 16 B/cycle each: 64 cycles, served back to back) and the hit's 20 cycles
+    full, rec, terms = _both(_store_then_chain(), {"a": 32 * 40}, 32, L2)
+    bounds, extra = terms[1]
+    assert bounds["dram"] == 0 and bounds["latency"] == 10 * (1 + 64 + 20) and extra == 20
+    assert rec["passes"][1]["bound"] == "latency"
+    assert abs(rec["passes"][1]["cycles"] / 840 - 1) < 0.05          # the full model's walk: 840 cycles
+    assert full == 660 + 840
+
+
+def test_without_an_l2_every_request_pays_the_dram():
+    # the same walk with no L2: each load waits for its 32 requests on the DRAM (1 cycle each) and its 100 cycles
+    _, rec, terms = _both(_store_then_chain(), {"a": 32 * 40}, 32)
+    bounds, extra = terms[1]
+    assert "l2" not in bounds and bounds["latency"] == 10 * (1 + 32 + 100) and extra == 100
+
+
+def test_the_l2_sets_a_partitions_lines_reach():
+    # a slice serves every partitions-th 256-byte block; a line's set is its number modulo the sets
+    assert _usable_sets(load_gpu("laptop-ampere")) == 64          # 4 partitions: 2 lines of every 8, of 256 sets
+    assert _usable_sets(load_gpu("modern")) == 100                # 16 partitions: 2 of every 32, of 1,600 sets
+    assert _usable_sets(load_gpu("gtx280", SIMPLE + L2)) == 8     # one partition: every set
