@@ -98,3 +98,25 @@ def test_the_l2_sets_a_partitions_lines_reach():
     assert _usable_sets(load_gpu("laptop-ampere")) == 64          # 4 partitions: 2 lines of every 8, of 256 sets
     assert _usable_sets(load_gpu("modern")) == 100                # 16 partitions: 2 of every 32, of 1,600 sets
     assert _usable_sets(load_gpu("gtx280", SIMPLE + L2)) == 8     # one partition: every set
+
+
+def test_warps_behind_the_scoreboard_start_once_all_their_cells_are_free():
+    # fragments on cells 0, 1, 1, 2, 2, 0: dispatch packs warps {0, 1}, {1, 2}, {2, 0} (no cell twice in a warp),
+    # each pair of them sharing a cell, so they run one after another although no cell has more than two:
+    # warp 1 waits for warp 0 (cell 1), warp 2 for warp 1 (cell 2); each warp's chain is 205 cycles (the
+    # scoreboard, a load of 1 + 1 + 100 cycles and a store waiting for it, 1 + 101)
+    pix = np.array([0, 1, 1, 2, 2, 0])
+    plan = OpPlan([Pass("capture", "fullscreen", "fragment")], ["a"])
+    plan.add(0, "scoreboard", "a", 6, 1, lambda i, s: pix[i] * 4, 0)
+    plan.add(0, "load", "a", 6, 1, lambda i, s: pix[i] * 4, 4, dep=True)
+    plan.add(0, "store", "a", 6, 1, lambda i, s: pix[i] * 4, 4, dep=True)
+    gpu = load_gpu("gtx280", SIMPLE)
+    result = _Result(plan, {"a": 64})
+    work = Workload(plan, result.bases(), 64, 64, pix, np.arange(6), triangles=0)
+    full = Machine(gpu, lower(work, gpu), 64).run()
+    rec = _PassTimer(result, work, gpu).time(0)
+    bounds, _ = rec["terms"]
+    assert rec["warps"] == 3 and bounds["latency"] == 205
+    assert bounds["scoreboard"] == 2 * 205 and bounds["scoreboard_conflicts"] == 3 * 205
+    assert rec["bound"] == "scoreboard_conflicts"
+    assert 3 * 200 <= full <= 3 * 205          # each warp holds its cells 203 cycles: issue, the load, the store

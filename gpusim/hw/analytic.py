@@ -221,17 +221,65 @@ def _pass_packing(plan, groups: list[int], placement, p: int, work, gpu) -> _Pac
 
 
 def _scoreboard_bound(held: list, keys: np.ndarray, wchain: np.ndarray, packing: "_Packing",
-                      entries: int) -> float:
-    """The scoreboard's serialisation: a warp holds its fragments' cells for its whole latency chain, so the
-    fragments of one cell run one warp after another (the busiest cell's sum of its warps' chains), and
-    the warps in flight hold at most ``entries`` cells at once (cell-cycles held over the entries)."""
-    worst = 0.0
+                      entries: int) -> tuple[float, float]:
+    """The scoreboard's serialisation: (the busiest cell's and the entries' bound, the conflicts' bound).
+
+    A warp holds its fragments' cells for its whole latency chain, so the fragments of one cell run one warp after
+    another (the busiest cell's sum of its warps' chains), and the warps in flight hold at most ``entries`` cells
+    at once (cell-cycles held over the entries). And a warp starts only once every one of its cells is free: with
+    the warps waiting together, each time cells free the first waiting warps whose cells are all free start (in
+    submission order, a warp first whose cells no earlier starting warp takes), so the warps start in rounds (the
+    lexicographically first independent sets of the conflict graph, :func:`_conflict_rounds`); a warp ends its
+    chain after the last warp before it on each of its cells ended (the longest such path)."""
+    worst = conflicts = 0.0
     for held_keys, cells in held:
         warp = packing.warp_rank(keys, held_keys)
         worst = max(worst, float(np.bincount(cells, weights=wchain[warp]).max(initial=0.0)))
-        pairs = np.unique(warp * (int(cells.max(initial=0)) + 1) + cells)      # (warp, cell) held
-        worst = max(worst, float(wchain[pairs // (int(cells.max(initial=0)) + 1)].sum()) / entries)
-    return worst
+        span = int(cells.max(initial=0)) + 1
+        pairs = _sorted_distinct(warp * span + cells)      # (warp, cell) held
+        worst = max(worst, float(wchain[pairs // span].sum()) / entries)
+        conflicts = max(conflicts, _conflict_rounds(pairs // span, pairs % span, wchain))
+    return worst, conflicts
+
+
+def _conflict_rounds(warp: np.ndarray, cell: np.ndarray, chain: np.ndarray) -> float:
+    """The end of the last warp when warps holding ``cell`` (pairs, by warp) start in rounds: in each, the warps
+    of the lexicographically first maximal set of waiting warps that share no cell (found a step at a time: the
+    waiting warps first in submission order on each of their cells start, and the warps sharing a cell with
+    them wait for the next round); a warp starts when the warps before it on its cells have ended, and runs its
+    ``chain``."""
+    n = len(chain)
+    if not len(warp):
+        return 0.0
+    by_cell = np.lexsort((warp, cell))
+    pw, pc = warp[by_cell], cell[by_cell]
+    cell_of = np.cumsum(np.r_[False, pc[1:] != pc[:-1]])          # dense cell numbers, ascending
+    free_at = np.zeros(int(cell_of[-1]) + 1)                      # each cell's last holder's end
+    end = np.zeros(n)
+    big = np.iinfo(np.int64).max
+    while len(pw):                                # a round; pw, cell_of: the pairs of the warps still waiting
+        cell_start = run_starts(cell_of)
+        candidate = np.zeros(n, bool)
+        candidate[pw] = True
+        started = np.zeros(n, bool)
+        while candidate.any():
+            live = candidate[pw]
+            first = np.repeat(np.minimum.reduceat(np.where(live, pw, big), cell_start),
+                              np.diff(np.append(cell_start, len(pw))))
+            behind = np.bincount(pw[live & (pw != first)], minlength=n)
+            go = candidate & (behind == 0)            # first on every one of its cells among the candidates
+            started |= go
+            taken = np.zeros(len(free_at), bool)
+            taken[cell_of[go[pw]]] = True
+            candidate &= ~go
+            candidate[pw[taken[cell_of] & candidate[pw]]] = False      # they share a cell with a starting warp
+        mine = started[pw]
+        start = np.zeros(n)
+        np.maximum.at(start, pw[mine], free_at[cell_of[mine]])
+        end[started] = start[started] + chain[started]
+        free_at[cell_of[mine]] = end[pw[mine]]
+        pw, cell_of = pw[~mine], cell_of[~mine]
+    return float(end.max())
 
 
 def _take(values: np.ndarray, idx) -> np.ndarray:
@@ -799,7 +847,8 @@ class _PassTimer:
             "rop": float(rop_unit[p].max()),
         }
         if held:
-            bounds["scoreboard"] = _scoreboard_bound(held, chain_keys, wchain, packing, gpu.scoreboard.entries)
+            bounds["scoreboard"], bounds["scoreboard_conflicts"] = _scoreboard_bound(
+                held, chain_keys, wchain, packing, gpu.scoreboard.entries)
         mapping = thread_mapping(gpu, pk)
         keys = _lane_keys(pass_keys) if mapping in ("fragment", "triangle") else np.zeros(0, np.int64)
         if mapping == "fragment" and len(keys) and packing.warp is None:
