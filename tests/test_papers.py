@@ -289,6 +289,27 @@ def test_seed002_targets():
     assert (overall.ours, overall.verdict) == ("8 of 9 (89%)", "missed")
 
 
+def test_seed002_frames_scale_to_the_paper():
+    """A look-alike at its scaled frame stands for k^2 of it; at another size (the CI's) it is said not to."""
+    runs = []
+    for scene, (width, height) in (("like-dragon-002", (2560, 1330)), ("like-boxes-002", (640, 333)),
+                                   ("like-teapot-002", (96, 50))):
+        runs.append({"scene": scene, "variant": "alpha-blend", "cycles": 100.0, "microseconds": 2.0,
+                     "fragments": 1000, "width": width, "height": height})
+        runs.append({"scene": scene, "variant": "lucidraster", "depth_filter": 3, "cycles": 300.0,
+                     "microseconds": 6.0, "fragments": 1000, "width": width, "height": height,
+                     "stat.samples_per_tri_half_block": 4.0})
+    rows = by_key(paper002.compare(synthetic(runs, **{"stat.invalid_share": 0.0}), pd.DataFrame(
+        columns=["run", "stat", "labels", "value"])))
+    assert rows[("§3 NVidia table, Dragon", "samples in the frame")].ours == 1000
+    assert rows[("§3 NVidia table, Boxes", "samples in the frame")].ours == 16 * 1000
+    assert rows[("§3 NVidia table, Boxes", "LucidRaster time (us)")].ours == 16 * 6.0
+    assert "scaled 4x each way" in rows[("§3 NVidia table, Boxes", "LucidRaster SW/HW")].note
+    teapot = rows[("§3 NVidia table, Teapot", "LucidRaster SW/HW")]
+    assert teapot.ours == 3.0 and "not its frame" in teapot.note
+    assert rows[("§3 NVidia table, Teapot", "samples in the frame")].ours == 1000
+
+
 def seed003_results(tfss: float) -> pd.DataFrame:
     """Two frames with thesis-model times R-buffer 100, Weight-Factor 50 and TFSS ``tfss`` cycles."""
     runs = []
