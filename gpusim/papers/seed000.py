@@ -90,6 +90,7 @@ MEMORY_NOTE = {
            "is 2 MB)",
     "liu": "k = 4 entries of depth + RGBA32F (80 bytes a pixel) at 512x512; the peel depth (1 MB) and the RGBA32F "
            "accumulation (4 MB) are not counted",
+    "kbuffer": "k = 4 entries of depth + RGBA32F (80 bytes a pixel) at 512x512, the k the paper's 20 MB gives",
 }
 
 
