@@ -120,3 +120,49 @@ def test_warps_behind_the_scoreboard_start_once_all_their_cells_are_free():
     assert bounds["scoreboard"] == 2 * 205 and bounds["scoreboard_conflicts"] == 3 * 205
     assert rec["bound"] == "scoreboard_conflicts"
     assert 3 * 200 <= full <= 3 * 205          # each warp holds its cells 203 cycles: issue, the load, the store
+
+
+def _triangles(pixels, prims, triangles, ops):
+    """A software rasterizer's geometry pass: a thread per triangle loops over its fragments, each issuing ``ops``
+    (op, structure, byte offset of the fragment's pixel, dep)."""
+    plan = OpPlan([Pass("draw", "geometry", "fragment", software=True)], ["fb", "c"])
+    pixels = np.asarray(pixels, np.int64)
+    for op, structure, dep in ops:
+        plan.add(0, op, structure, len(pixels), 1, lambda i, s: pixels[i] * 4, 4, dep=dep)
+    gpu = load_gpu("gtx280", SIMPLE + ["raster.setup_instructions=0", "raster.pixel_instructions=0"])
+    result = _Result(plan, {"fb": 64 * 64 * 4, "c": 64 * 64 * 4})
+    work = Workload(plan, result.bases(), 64, 64, pixels, np.asarray(prims, np.int64), triangles=triangles)
+    return Machine(gpu, lower(work, gpu), 64).run(), _PassTimer(result, work, gpu).time(0)
+
+
+def test_a_triangle_thread_loads_its_indices_and_vertices_before_its_fragments():
+    # one triangle, one fragment that stores: the index load (1 cycle of issue, 100 of latency, 1 request of 32 B
+    # on the DRAM's 32 B/cycle), the vertex load that needs it (48 B: 2 requests), then the store
+    full, rec = _triangles([5], [0], 1, [("store", "fb", False)])
+    assert full == (1 + 100) + (2 + 100) + (1 + 100)
+    bounds, extra = rec["terms"]
+    assert rec["bound"] == "latency" and bounds["latency"] == (1 + 100 + 1) + (1 + 100 + 2) + 1 and extra == 100
+
+
+def test_lanes_of_one_instruction_on_one_word_serialize():
+    # 32 pixel threads increment one counter, then store what it returned: the instruction's 32 operations on
+    # the word start 10 cycles apart (atomic.same_address_cycles), so the store waits 31 x 10 + 50 cycles
+    plan = OpPlan([Pass("count", "fullscreen", "pixel")], ["c", "fb"])
+    plan.add(0, "atomic_inc", "c", 32, 1, lambda i, s: i * 0, 4)
+    plan.add(0, "store", "fb", 32, 1, lambda i, s: i * 4, 4, dep=True)
+    full, _, terms = _both(plan, {"c": 4, "fb": 128}, 32)
+    bounds, extra = terms[0]
+    assert full == 31 * 10 + 50 + (4 + 100)               # then the store: its 4 requests and 100 cycles
+    assert bounds["latency"] == 1 + (31 * 10 + 50) + 1 and extra == 100
+
+
+def test_a_triangle_threads_warp_waits_for_its_own_instructions_words():
+    # two coplanar triangles of 3 fragments on the same pixels, each fragment an atomicMin on its pixel's word
+    # that the next waits for: at each of the warp's 3 iterations its 2 lanes' operations on one word go 10
+    # cycles apart; a single triangle of 3 fragments beside them (another warp) waits for none
+    pixels, prims = [1, 2, 3, 1, 2, 3] + [70, 71, 72], [0, 0, 0, 1, 1, 1] + [32, 32, 32]
+    full, rec = _triangles(pixels, prims, 33, [("atomic_min", "c", True)])
+    bounds, _ = rec["terms"]
+    prefix = (1 + 100 + 16) + (1 + 100 + 48)       # a warp of 32 triangles' indices (512 B), vertices (1,536 B)
+    assert bounds["latency"] == prefix + 3 * (1 + 50) + 3 * 10
+    assert abs(bounds["latency"] / full - 1) < 0.02, (bounds["latency"], full)     # the full model: 444

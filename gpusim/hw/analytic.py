@@ -10,8 +10,12 @@ largest of
   (compute groups: the busiest lane's instructions per warp), over the SMs;
 * latency: each lane's dependent chain (an operation that waits for a result
   adds that unit's round trip; a memory operation also its warp instruction's
-  requests on its busiest partition, served back to back), the slowest warp, or
-  the SM's warps' chains divided by the resident warps that hide each other;
+  requests on its busiest partition, served back to back; an atomic one its
+  instruction's operations on its busiest word, ``same_address_cycles`` apart),
+  the slowest warp, or the SM's warps' chains divided by the resident warps that
+  hide each other; a triangle thread's warp (software rasterizer) first loads
+  its triangles' indices, then vertices, and runs the setup and its largest
+  bounding box's scan;
 * dram: requests (lanes of a warp instruction on one ``coalescer.segment_bytes``
   segment, an access over a segment boundary on two, measured on every
   operation of the lanes of a sample of warps in runs spread over the group)
@@ -48,6 +52,7 @@ from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_trian
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
+from gpusim.schemes.common.arrays import rank_in_runs
 from gpusim.hw.pass_schedule import TERMS, Schedule, interpolated, pass_families
 from gpusim.hw.placement import Aranges, StillIssuing, count_key, group_passes, thread_ids_of
 from gpusim.opplan import ThreadRange
@@ -170,8 +175,8 @@ OP_SAMPLE = 1 << 17      # operations a memory group's coalescing and L2 sample 
 
 
 def _op_sample(lanes: np.ndarray, counts: np.ndarray, ws: int, every: bool) -> tuple:
-    """A spread sample of a group's operations: (thread index, operation number, the warp of its lane among the
-    group's) of the first operation of the lanes of at most 4,096 warps, or (``every``) of all the operations of the
+    """A spread sample of a group's operations: (thread index, operation number, the position of its lane in
+    ``lanes``) of the first operation of the lanes of at most 4,096 warps, or (``every``) of all the operations of the
     lanes of as many warps as hold about :data:`OP_SAMPLE` of them (16 at least); the warps in
     :data:`SAMPLE_BLOCKS` runs of consecutive warps spread evenly over ``lanes`` (a run keeps the re-use of lines
     between neighbouring warps)."""
@@ -179,16 +184,48 @@ def _op_sample(lanes: np.ndarray, counts: np.ndarray, ws: int, every: bool) -> t
     c0, uniform = _uniform(counts)
     if not every or (uniform and c0 <= 1):
         pos = _warp_positions(n, ws, 4096)
-        return lanes[pos], np.broadcast_to(np.zeros(1, np.int64), pos.shape), pos // ws
+        return lanes[pos], np.broadcast_to(np.zeros(1, np.int64), pos.shape), pos
     mean = -(-int(counts.sum()) // max(1, n))
     pos = _warp_positions(n, ws, int(np.clip(OP_SAMPLE // (ws * max(1, mean)), 16, 4096)))
     c = np.asarray(_take(counts, pos), np.int64)
     rank = np.repeat(np.arange(len(pos)), c)
     first = np.cumsum(c) - c
-    return lanes[pos][rank], np.arange(len(rank), dtype=np.int64) - first[rank], pos[rank] // ws
+    return lanes[pos][rank], np.arange(len(rank), dtype=np.int64) - first[rank], pos[rank]
 
 
 SAMPLE_BLOCKS = 16       # runs of consecutive warps a group's sample is taken in
+
+
+def _loop_instructions(tri: np.ndarray, ws: int) -> tuple[np.ndarray, int]:
+    """The warp instruction of each fragment of triangle threads (``tri``: each fragment's triangle), numbered
+    warp ``tri // ws`` times the iterations plus the iteration (the fragment's rank among its triangle's, in
+    thread order); and the iterations."""
+    if len(tri) > 1 and not (tri[1:] >= tri[:-1]).all():
+        order = np.argsort(tri, kind="stable")
+        j = np.empty(len(tri), np.int64)
+        j[order] = rank_in_runs(tri[order])
+    else:
+        j = rank_in_runs(tri)
+    iterations = int(j.max(initial=0)) + 1
+    return (tri // ws) * iterations + j, iterations
+
+
+def _warp_waits(warp: np.ndarray, waits: np.ndarray, ws: int):
+    """Per triangle, the cycles its warp's atomic instructions wait for their busiest words (``waits`` of the
+    sampled instructions of warps ``warp``, summed over each warp's; a warp the sample missed waits the sampled
+    warps' mean): a function of the lane keys (triangles, ``ws`` a warp)."""
+    n = int(warp.max(initial=-1)) + 1
+    total = np.bincount(warp, weights=waits, minlength=n)
+    sampled = np.bincount(warp, minlength=n) > 0
+    fill = float(total[sampled].mean()) if sampled.any() else 0.0
+
+    def at(keys: np.ndarray) -> np.ndarray:
+        w = keys // ws
+        out = np.full(len(keys), fill)
+        inside = w < n
+        out[inside] = np.where(sampled[w[inside]], total[w[inside]], fill)
+        return out
+    return at
 
 
 def _warp_positions(n: int, ws: int, warps: int) -> np.ndarray:
@@ -566,14 +603,15 @@ class _L2Pass:
         self.missed += nbytes * miss
         return miss
 
-    def vertex_misses(self, triangles: int) -> float:
-        """The share of a software rasterizer's vertex and index bytes that miss."""
+    def vertex_misses(self, triangles: int) -> tuple[float, float]:
+        """A software rasterizer's vertex and index loads: the DRAM's bytes per byte loaded, and the share that
+        misses."""
         m = self.model
         if not m.present:
-            return 1.0
+            return 1.0, 1.0
         miss = 1.0 if m.vertex_first >= self.p else 1.0 - m.kept(self.p)
         self._count(triangles * (INDEX_BYTES + 3 * m.vertex_bytes), miss)
-        return miss * (1.0 + m.evicting(self.p) * m.line / (INDEX_BYTES + 3 * m.vertex_bytes))
+        return miss * (1.0 + m.evicting(self.p) * m.line / (INDEX_BYTES + 3 * m.vertex_bytes)), miss
 
     def miss_ratio(self) -> float:
         return self.missed / self.requests if self.requests else (0.0 if self.model.present else 1.0)
@@ -620,6 +658,15 @@ class _PassTimer:
         self.units_of: dict = {}               # ROP group -> the unit of each of its threads' first address
         self.l2 = _L2Model(plan, result, self.placement, self.groups_of_pass, gpu, work)
 
+    def _contiguous_round_trip(self, nbytes: int, miss: float) -> float:
+        """The round trip of a warp instruction reading ``nbytes`` contiguous bytes that miss the L2 with
+        probability ``miss``: the latency, and its requests on the busiest partition (the interleave's blocks
+        dealt round the partitions) served back to back."""
+        m = self.gpu.memory
+        blocks = -(-nbytes // m.interleave_bytes)
+        busiest = min(nbytes, -(-blocks // m.partitions) * m.interleave_bytes)
+        return self.l2.latency(miss) + self.l2.service(-(-busiest // SECTOR) * SECTOR, miss)
+
     def per_pass(self) -> tuple:
         return self.wis, self.alu, self.dram_bytes, self.atomic_ops, self.hottest, self.rop_unit, self.l2_bytes
 
@@ -640,7 +687,7 @@ class _PassTimer:
         if pk.kind == "flush":
             return {"name": pk.name, "kind": pk.kind, "bound": "flush", "warps": 0,
                     "cycles": flush_cycles(c, -(-work.width * work.height // ws)) + overhead}
-        last_producer, waited = None, False
+        last_producer, last_serial, waited = None, None, False
         steps = 0                             # instructions a warp has issued before the group (the busiest lane's)
         adds: list = []                       # each group's lane info, dependent-chain cycles per lane, threads
         pass_keys: list = []                  # the lane keys of each group in the pass
@@ -746,14 +793,18 @@ class _PassTimer:
             live = None if not len(counts) or (c0 if uniform else int(counts.min())) > 0 else counts > 0
             lanes_live = lanes_sel if live is None else lanes_sel[live]
             counts_live = counts if live is None else counts[live]
-            mem_lat = lat[MEM]
+            mem_lat, atomic_lat, serial = lat[MEM], lat[ATOMIC], None
+            # a triangle thread's loop: its warp's instruction at iteration j carries its triangles' j-th fragments
+            lane_inst, iterations = _loop_instructions(work.frag_prim[thread[lanes_live]], ws) \
+                if triangles and cls in (MEM, ATOMIC) and len(lanes_live) else (None, 1)
             if not len(lanes_live) or compute:
                 pass                             # no thread issues this group in this pass, or no memory
             elif cls == MEM:
                 # coalescing and the L2's lines on a spread sample of the group's operations (every operation of
                 # the sampled lanes: a thread's later operations may straddle segments its first does not)
-                i_s, seq_s, warp_s = _op_sample(lanes_live, counts_live, ws,
-                                                g.seq_pass is None and g.pass_fn is None)
+                i_s, seq_s, pos_s = _op_sample(lanes_live, counts_live, ws,
+                                               g.seq_pass is None and g.pass_fn is None)
+                warp_s = pos_s // ws if lane_inst is None else lane_inst[pos_s]
                 addr = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
                 nb_s = nb if nb is not None else np.asarray(g.bytes(i_s, seq_s), np.int64)
                 bytes_ = float(nb) if nb is not None else float(np.mean(nb_s))
@@ -793,6 +844,22 @@ class _PassTimer:
             elif cls == ATOMIC:
                 atomic_ops[p] += ops
                 hottest[p] = max(hottest[p], float(_hottest(addr)))
+                # lanes of one instruction on one word serialize: the instruction's result waits for its busiest
+                # word's operations, same_address_cycles apart
+                i_s, seq_s, pos_s = _op_sample(lanes_live, counts_live, ws,
+                                               g.seq_pass is None and g.pass_fn is None)
+                words = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
+                steps_ = int(seq_s.max(initial=0)) + 1
+                inst = (pos_s // ws if lane_inst is None else lane_inst[pos_s]) * steps_ + seq_s
+                key = np.sort((inst << 36) + (words & SEG_MASK))
+                starts = run_starts(key)
+                per_word = np.diff(np.append(starts, len(key)))
+                runs = run_starts(key[starts] >> 36)
+                waits = (np.maximum.reduceat(per_word, runs) - 1) * float(gpu.atomic.same_address_cycles)
+                if lane_inst is None:            # an instruction an operation: the mean instruction's wait
+                    atomic_lat = lat[ATOMIC] + (float(waits.mean()) if len(waits) else 0.0)
+                else:                            # a triangle thread's warp: its own instructions' waits
+                    serial = _warp_waits((key[starts][runs] >> 36) // (steps_ * iterations), waits, ws)
             elif cls == ROP:
                 if addr is None:                # a group over many passes: each thread's unit, found once
                     if gi not in units_of:
@@ -816,15 +883,19 @@ class _PassTimer:
             same = uniform and distinct
             add = (c0 if same else per_lane) * (alu_cost if compute else cost)
             lp = last_producer
-            unit_lat = mem_lat if cls == MEM else lat.get(cls, 0)
+            unit_lat = mem_lat if cls == MEM else atomic_lat if cls == ATOMIC else lat.get(cls, 0)
             if g.dep and produces:
                 add = add + (c0 if same else per_lane) * unit_lat
+                if serial is not None:
+                    add = add + serial(keys)
             elif g.dep and lp is not None and not waited:
                 add = add + (1 if same or threads_in is None else threads_in) * lp
+                if last_serial is not None:
+                    add = add + last_serial(keys)
             adds.append((got, add, (thread, issuing.count, issuing.s, sel) if known and issuing is not None
                          and g.seq_pass is not None else None))
             if produces:
-                last_producer, waited = unit_lat, False
+                last_producer, last_serial, waited = unit_lat, serial, False
             elif g.dep:
                 waited = True
         self.last_still, self.sel_lanes = list(still.values()), made_lanes
@@ -833,7 +904,31 @@ class _PassTimer:
         chain = _chain_on_lanes(adds, nested)
         chain_keys, lane_chain = chain if chain is not None else _chain_on_range(adds)
         del adds, chain
-        wchain = packing.warp_max(lane_chain, chain_keys)
+        mapping = thread_mapping(gpu, pk)
+        keys = _lane_keys(pass_keys) if mapping in ("fragment", "triangle") else np.zeros(0, np.int64)
+        if mapping == "triangle":
+            # software rasterizer: a thread per submitted triangle (warps of consecutive triangles, those that cover
+            # no pixel included) loads its indices, then its vertices, sets up and scans its bounding box (a warp
+            # its largest box) before its fragments' operations
+            r = gpu.raster
+            tris = submitted_triangles(pk, work) if pk.primitives is None else int(keys.max()) + 1
+            frags = _union([ids[i] for i in groups_of_pass[p]])
+            box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
+            setup_w = c.alu_cycles(r.setup_instructions + r.pixel_instructions * _warp_max(box, ws))
+            sw_warps = -(-tris // ws)
+            vertex_dram, vertex_miss = l2.vertex_misses(tris)
+            wchain = np.zeros(sw_warps)
+            wk = chain_keys // ws
+            if len(wk):
+                runs = run_starts(wk)
+                wchain[wk[runs]] = np.maximum.reduceat(lane_chain, runs)
+            # the index load's round trip, then the vertex load's, each with its instruction's requests on the
+            # busiest partition (the warp's triangles' bytes are contiguous)
+            fetch = [self._contiguous_round_trip(min(ws, tris) * nb, vertex_miss)
+                     for nb in (INDEX_BYTES, 3 * r.vertex_bytes)]
+            wchain += 2 * cost + sum(fetch) + setup_w
+        else:
+            wchain = packing.warp_max(lane_chain, chain_keys)
         n_warps = len(wchain)
         sm = SimtCore.place(n_warps, c.sms)
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
@@ -849,8 +944,6 @@ class _PassTimer:
         if held:
             bounds["scoreboard"], bounds["scoreboard_conflicts"] = _scoreboard_bound(
                 held, chain_keys, wchain, packing, gpu.scoreboard.entries)
-        mapping = thread_mapping(gpu, pk)
-        keys = _lane_keys(pass_keys) if mapping in ("fragment", "triangle") else np.zeros(0, np.int64)
         if mapping == "fragment" and len(keys) and packing.warp is None:
             # the front end sees every triangle; the pixel shader runs 4 lanes per 2x2 quad (helper lanes)
             quads = quad_memo.quads(keys, work)
@@ -858,18 +951,11 @@ class _PassTimer:
             bounds["raster"] = max(submitted_triangles(pk, work) * per_triangle_cycles(gpu),
                                    quads / gpu.raster.quads_per_cycle)
         elif mapping == "triangle":
-            # software rasterizer: a thread per submitted triangle loads its vertices, sets up and scans its
-            # bounding box; a warp lasts as long as its largest box
-            tris = submitted_triangles(pk, work) if pk.primitives is None else int(keys.max()) + 1
-            frags = _union([ids[i] for i in groups_of_pass[p]])
-            r = gpu.raster
-            box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
             setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * alu_cost
-            sw_warps = -(-tris // ws)
             bounds["issue"] += (setup + 2 * sw_warps * cost) / min(c.sms, sw_warps)
             vertex_bytes = tris * (INDEX_BYTES + 3 * r.vertex_bytes)
             l2_bytes[p] += vertex_bytes
-            dram_bytes[p] += vertex_bytes * l2.vertex_misses(tris)
+            dram_bytes[p] += vertex_bytes * vertex_dram
             bounds["dram"] = dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions)
             used[p].add(MEM)
         if self.l2.present:
