@@ -52,12 +52,19 @@ weight factors as Weight-Factor does (seed 003 section 4.3.2): each pair of a
 pixel's m visible fragments compared once, m (m - 1) / 2 x
 ``WEIGHT_FACTOR_PAIR``, and each fragment blended with its weight
 (``COMPOSITE``); m is each pixel's real count.
+
+The model places the stored fragments by pixel in arrival order
+(gpusim.schemes.common.sections.place_runs) and takes only the capture pass's
+threads back to submission order; the section ids and T-buffer and Length Table
+offsets are worked out when the plan is first expanded (a functional run needs
+none of them).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -70,7 +77,7 @@ from gpusim.schemes.common.early_z import (early_z, pipeline_buffers, pipeline_s
                                            storage_bytes)
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.leading_zeros import LzeMode, length_field_bits
-from gpusim.schemes.common.sections import SectionIndex, place, read_runs
+from gpusim.schemes.common.sections import RunPlacement, SectionIndex, place_runs, read_runs
 from gpusim.schemes.common.storage import DEPTH_BYTES
 from gpusim.schemes.common.weights import (Ties, check_fragment_bytes, stored_colours, unorm_rounder,
                                            weighted_image)
@@ -117,31 +124,35 @@ class TFSS(Scheme):
 
         cand = np.flatnonzero(ez.stored)
         in_stored = ez.stored_by_arrival
+        # the stored fragments by pixel in arrival order, and their colours: placement and the read pass take them
+        # in this order, and only the capture pass's threads are taken back to submission order
         stored_order, stored_pix = g.by_arrival[in_stored], g.pix_by_arrival[in_stored]
-        # the stored fragments' colours by pixel in arrival order (as place and the read pass take them)
         col = stored_colours(np.take(trace.rgba, stored_order, axis=0), bits, 8 * self.fragment_bytes, lze)
-        frag_bits = np.zeros(n, np.int64)
-        frag_bits[stored_order] = col.bits
         exact_fit = lze == "off" and self.section_bytes in (0, L * self.fragment_bytes)
-        pl = place(pix, stored_order, n, L, None if exact_fit else frag_bits, None if exact_fit else 8 * M,
-                   stored_pix, None if exact_fit else col.bits)
-
-        openers = np.flatnonzero(pl.opener)                 # submission order = allocation order
+        pl = place_runs(stored_pix, L, None if exact_fit else col.bits, None if exact_fit else 8 * M)
+        fits = None if pl.fits is None or pl.fits.all() else pl.fits     # None: every stored fragment is kept
+        opens = pl.slot == 0                                # the fragment that allocated its section
+        nsec = np.bincount(stored_pix[opens], minlength=P)
+        if fits is None:
+            kept, kept_by_arrival, read_pix, vis = cand, in_stored, stored_pix, ez.visible
+        else:
+            kept_mask = ez.stored.copy()
+            kept_mask[stored_order[~fits]] = False
+            kept, read_pix, vis = np.flatnonzero(kept_mask), stored_pix[fits], ez.visible & kept_mask
+            kept_by_arrival = in_stored.copy()
+            kept_by_arrival[in_stored] = fits
+        # in submission order, one scatter: each kept fragment's chain position and whether it opened its section;
+        # the openers in submission order are the allocation order, the first of a pixel's chain and the later
+        code = np.empty(n, np.int64)
+        code[stored_order] = 2 * pl.chain + ~opens
+        kept_code = code[kept]
+        kept_chain = kept_code >> 1
+        opener = (kept_code & 1) == 0
+        openers, opener_chain = kept[opener], kept_chain[opener]
         n_s = len(openers)
-        nsec = np.bincount(pix[openers], minlength=P)
-        # the kept fragments by pixel in arrival order: each pixel's sections in chain order, each opened by
-        # the first fragment in it
-        read = pl.kept[stored_order] if pl.kept_given is None else pl.kept_given
-        read_order = stored_order[read]
-        opens = (pl.slot[read_order] if pl.slot_given is None else pl.slot_given[read]) == 0
-        section_id = np.empty(n, np.int64)
-        section_id[openers] = np.arange(n_s)
-        section = SectionIndex.grouped(nsec, section_id[read_order[opens]])
-        kept = np.flatnonzero(pl.kept)
-        sec_of = np.full(n, -1, np.int64)
-        sec_of[read_order] = section.ids[np.cumsum(opens) - 1]
-        t_off = sec_of * M + pl.bits_before // 8
-        t_bytes = -(-frag_bits // 8)
+        is_later = opener_chain > 0
+        first, later, later_chain = openers[~is_later], openers[is_later], opener_chain[is_later]
+        at = _Addresses(n, stored_order, pl, fits, openers, nsec, col.bits, M, kept)
         lt_field = length_field_bits(bits, lze)
         lt_bytes = math.ceil(L * lt_field / 8)
 
@@ -149,22 +160,21 @@ class TFSS(Scheme):
         if lze != "off":
             plan.compute(1, cand, LEADING_ZEROS)
         plan.add(1, "load", "ssa_table", kept, 1, lambda i, s: pix[kept[i]] * SA, SA, dep=True)
-        plan.add(1, "load", "nsa_table", kept, pl.chain[kept],
-                 lambda i, s: section(pix[kept[i]], s) * SA, SA, dep=True)
-        first = openers[pl.chain[openers] == 0]
-        later = openers[pl.chain[openers] > 0]
-        plan.add(1, "store", "nsa_table", openers, 1, lambda i, s: sec_of[openers[i]] * SA, SA, dep=True)
+        plan.add(1, "load", "nsa_table", kept, kept_chain,
+                 lambda i, s: at.section(pix[kept[i]], s) * SA, SA, dep=True)
+        # the i-th section allocated is section i
+        plan.add(1, "store", "nsa_table", openers, 1, lambda i, s: i * SA, SA, dep=True)
         plan.add(1, "store", "ssa_table", first, 1, lambda i, s: pix[first[i]] * SA, SA, dep=True)
         plan.add(1, "store", "nsa_table", later, 1,
-                 lambda i, s: section(pix[later[i]], pl.chain[later[i]] - 1) * SA, SA, dep=True)
-        plan.add(1, "store", "t_buffer", kept, 1, lambda i, s: t_off[kept[i]], lambda i, s: t_bytes[kept[i]],
-                 dep=True)
+                 lambda i, s: at.section(pix[later[i]], later_chain[i] - 1) * SA, SA, dep=True)
+        plan.add(1, "store", "t_buffer", kept, 1, lambda i, s: at.t_off[at.kept_at[i]],
+                 lambda i, s: at.t_bytes[at.kept_at[i]], dep=True)
         if lze != "off":
-            plan.add(1, "store", "length_table", kept, 1,
-                     lambda i, s: sec_of[kept[i]] * lt_bytes + pl.slot[kept[i]] * lt_field // 8, 1, dep=True)
+            plan.add(1, "store", "length_table", kept, 1, lambda i, s: at.section_of[at.kept_at[i]] * lt_bytes
+                     + at.slot[at.kept_at[i]] * lt_field // 8, 1, dep=True)
 
         # read (Figure 3-9), one thread per pixel
-        rpix, rstart, rcount = read_runs(pix, read_order, P, stored_pix[read])
+        rpix, rstart, rcount = read_runs(pix, None, P, read_pix)
         read_per_pixel = np.zeros(P, np.int64)
         read_per_pixel[rpix] = rcount
         if self.read_scan == "all":
@@ -173,36 +183,33 @@ class TFSS(Scheme):
             plan.add(2, "load", "ssa_table", rpix, 1, lambda i, s: rpix[i] * SA, SA)
         if ez.uses_z:   # phase 2: the stored fragments meet the final opaque depth
             plan.add(2, "load", "z_buffer", rpix, 1, lambda i, s: rpix[i] * DEPTH_BYTES, DEPTH_BYTES)
-        plan.add(2, "load", "nsa_table", rpix, nsec[rpix], lambda i, s: section(rpix[i], s) * SA, SA, dep=True)
+        plan.add(2, "load", "nsa_table", rpix, nsec[rpix], lambda i, s: at.section(rpix[i], s) * SA, SA, dep=True)
         if lze != "off":
             plan.add(2, "load", "length_table", rpix, nsec[rpix],
-                     lambda i, s: section(rpix[i], s) * lt_bytes, lt_bytes, dep=True)
-        plan.add(2, "load", "t_buffer", rpix, rcount, lambda i, s: t_off[read_order[rstart[i] + s]],
-                 lambda i, s: t_bytes[read_order[rstart[i] + s]], dep=True)
-        vis = ez.visible & pl.kept
-        visible_count = np.bincount(pix[vis], minlength=P)
+                     lambda i, s: at.section(rpix[i], s) * lt_bytes, lt_bytes, dep=True)
+        plan.add(2, "load", "t_buffer", rpix, rcount, lambda i, s: at.t_off[at.read_at[rstart[i] + s]],
+                 lambda i, s: at.t_bytes[at.read_at[rstart[i] + s]], dep=True)
+        vis_by_arrival = ez.visible_by_arrival if fits is None else ez.visible_by_arrival & kept_by_arrival
+        visible_count = np.bincount(g.pix_by_arrival[vis_by_arrival], minlength=P)
         m = visible_count[rpix]                             # visible fragments per pixel read
         plan.compute(2, rpix, weight_factor_work(m) + m * (LEADING_ZEROS_DECODE if lze != "off" else 0))
         blended = resolve_writes(plan, 2, pix, vis, P, fb_bytes, visible_count)
-        kept_by_arrival = in_stored.copy()
-        kept_by_arrival[in_stored] = read
         image, order, order_pix = weighted_image(trace, g, vis, stored_order, col, ez.opaque_rgb, self.ties,
-                                                 ez.visible_by_arrival & kept_by_arrival, ez.key_by_arrival,
-                                                 np.cumsum(in_stored) - 1, with_pixels=True)
+                                                 vis_by_arrival, ez.key_by_arrival, np.cumsum(in_stored) - 1,
+                                                 with_pixels=True)
 
-        stored_bits = int(col.bits[read].sum())
+        stored_bits = int((col.bits if fits is None else col.bits[fits]).sum())
+        unfit_pix = stored_pix[~fits] if fits is not None else stored_pix[:0]
         struct = [
             *pipeline_buffers(P, fb_bytes, bits, ez, blended > 0),
             Structure("ssa_table", SA, P, len(first), "start-section address per pixel (S_A x W x H)"),
             Structure("t_buffer", M, n_s, n_s, f"sections of M_section = {M} B, up to {L} fragments each"),
-            Structure("nsa_table", SA, n_s, int(np.count_nonzero(pl.chain[openers] > 0)),
-                      "next-section address per allocated section (S_A x N_S)"),
+            Structure("nsa_table", SA, n_s, len(later), "next-section address per allocated section (S_A x N_S)"),
         ]
         if lze != "off":
             struct.append(Structure("length_table", lt_bytes, n_s, n_s,
                                     f"{L} x {lt_field}-bit colour lengths per section"))
         storage = storage_bytes(struct)
-        unfit = np.flatnonzero(ez.stored & ~pl.kept)
         stats = {
             "sections": Stat(n_s, "sections", "N_S: T-buffer sections allocated"),
             "storage_system_bytes": Stat(storage, "bytes", "Table 4-2 total: T-buffer + SSA + NSA "
@@ -216,11 +223,76 @@ class TFSS(Scheme):
                                              "mean stored size of a fragment after compression"),
             "section_breaks": Stat(pl.early_breaks, "fragments",
                                    "fragments that opened a new section because the current one lacked bytes"),
-            "unfit_fragments": Stat(len(unfit), "fragments",
+            "unfit_fragments": Stat(len(unfit_pix), "fragments",
                                     "fragments larger than a whole section (dropped)"),
         }
         return SchemeResult(
             self.name, self.params(), image, n, g.covered, struct, plan, geometry_passes=1,
-            dropped_fragments=len(unfit), overflowed_pixels=int(len(np.unique(pix[unfit]))),
+            dropped_fragments=len(unfit_pix), overflowed_pixels=len(np.unique(unfit_pix)),
             lists=CapturedLists(order_pix, order), stats=stats,
             extras={"read_per_pixel": read_per_pixel})
+
+
+class _Addresses:
+    """Where the kept fragments' sections, T-buffer bytes and Length Table fields are: only an expansion of the
+    plan (the timing model, the OpStream) reads them, so they are worked out on its first call, never in a
+    functional run. Arrays of the stored fragments are in their order by pixel and arrival (``stored_order``)."""
+
+    def __init__(self, n: int, stored_order: np.ndarray, placement: RunPlacement, fits: np.ndarray | None,
+                 openers: np.ndarray, sections_per_pixel: np.ndarray, frag_bits: np.ndarray, m_section: int,
+                 kept_threads: np.ndarray):
+        self._n, self._stored_order, self._pl, self._fits = n, stored_order, placement, fits
+        self._openers, self._nsec, self._frag_bits = openers, sections_per_pixel, frag_bits
+        self._m, self._kept_threads = m_section, kept_threads
+
+    @cached_property
+    def _ids(self) -> np.ndarray:
+        """Each section's id (allocation order: its opener's place in submission order), the sections in
+        (pixel, chain position) order."""
+        section_id = np.empty(self._n, np.int64)
+        section_id[self._openers] = np.arange(len(self._openers))
+        return section_id[self._stored_order[self._pl.slot == 0]]
+
+    @cached_property
+    def section(self) -> SectionIndex:
+        """The section id of (pixel, chain position)."""
+        return SectionIndex.grouped(self._nsec, self._ids)
+
+    @cached_property
+    def section_of(self) -> np.ndarray:
+        """Each stored fragment's section id (-1: not kept)."""
+        if len(self._ids) == 0:
+            return np.full(len(self._stored_order), -1, np.int64)
+        sec = self._ids[np.cumsum(self._pl.slot == 0) - 1]      # the last section opened at its pixel
+        if self._fits is not None:
+            sec[~self._fits] = -1
+        return sec
+
+    @property
+    def slot(self) -> np.ndarray:
+        """Each stored fragment's slot in its section (-1: not kept)."""
+        return self._pl.slot
+
+    @cached_property
+    def t_off(self) -> np.ndarray:
+        """Each stored fragment's T-buffer byte offset (without a bit budget the placement counts no bits before a
+        fragment, so every fragment of a section is at the section's start)."""
+        before = self._pl.bits_before
+        return self.section_of * self._m + (0 if before is None else before // 8)
+
+    @cached_property
+    def t_bytes(self) -> np.ndarray:
+        """Each stored fragment's T-buffer bytes."""
+        return -(-self._frag_bits // 8)
+
+    @cached_property
+    def kept_at(self) -> np.ndarray:
+        """The place among the stored fragments of each capture thread (a kept fragment, submission order)."""
+        place = np.empty(self._n, np.int64)
+        place[self._stored_order] = np.arange(len(self._stored_order))
+        return place[self._kept_threads]
+
+    @cached_property
+    def read_at(self) -> np.ndarray:
+        """The place among the stored fragments of each kept one, by pixel and arrival (the read pass's order)."""
+        return np.arange(len(self._stored_order)) if self._fits is None else np.flatnonzero(self._fits)
