@@ -130,3 +130,21 @@ def test_tfss_compiled_and_numpy_placement_agree_bit_for_bit(monkeypatch, params
         assert np.array_equal(got.lists.fragment, want.lists.fragment)
         assert plan_rows(got) == plan_rows(want)
     assert any(r.stats["section_breaks"].value or r.stats["unfit_fragments"].value for r in compiled)
+
+
+@pytest.mark.parametrize("params", [{}, {"l_num": 3}, {"leading_zero_elimination": "fixed"},
+                                    {"leading_zero_elimination": "variable", "section_bytes": 14}])
+def test_every_stored_fragment_has_its_own_t_buffer_bytes(params):
+    """A section's fragments follow each other in its bytes: no two stores of the capture share an address
+    (without a bit budget they were all at the section's start)."""
+    rng = np.random.default_rng(3)
+    n = 600
+    trace = make_trace(rng.integers(0, 6, n), rng.integers(0, 4, n), rng.random(n), rgba=rng.random((n, 4)),
+                       width=6, height=4)
+    result = make_scheme("tfss", params).simulate(trace)
+    plan = result.plan
+    stream = plan.expand(result.bases())
+    t_buffer = plan.structures.index("t_buffer")
+    stores = (stream.structure == t_buffer) & (stream.op == 1)     # OPS[1]: store
+    addr = stream.address[stores]
+    assert len(addr) and len(np.unique(addr)) == len(addr)

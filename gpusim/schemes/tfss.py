@@ -275,10 +275,10 @@ class _Addresses:
 
     @cached_property
     def t_off(self) -> np.ndarray:
-        """Each stored fragment's T-buffer byte offset (without a bit budget the placement counts no bits before a
-        fragment, so every fragment of a section is at the section's start)."""
+        """Each stored fragment's T-buffer byte offset: its section's start plus the bytes of the fragments before
+        it in the section (without a bit budget every fragment takes the same bytes, its slot's)."""
         before = self._pl.bits_before
-        return self.section_of * self._m + (0 if before is None else before // 8)
+        return self.section_of * self._m + (self._pl.slot * self.t_bytes if before is None else before // 8)
 
     @cached_property
     def t_bytes(self) -> np.ndarray:
