@@ -166,3 +166,35 @@ def test_a_triangle_threads_warp_waits_for_its_own_instructions_words():
     prefix = (1 + 100 + 16) + (1 + 100 + 48)       # a warp of 32 triangles' indices (512 B), vertices (1,536 B)
     assert bounds["latency"] == prefix + 3 * (1 + 50) + 3 * 10
     assert abs(bounds["latency"] / full - 1) < 0.02, (bounds["latency"], full)     # the full model: 444
+
+
+def test_a_pixel_shaders_warps_are_lowerings_helper_lanes_and_all():
+    # a triangle's fragments on a diagonal fill one lane of each of their 2x2 quads: 30 fragments, 30 quads, 120
+    # lanes in 4 warps; a depth test on every fragment and a store on every third spread over all the warps
+    # (a warp issues a group's instruction when any of its lanes has it), as lowering makes them
+    n = 30
+    pixels = np.arange(n) * (2 * 64 + 2)
+    plan = OpPlan([Pass("draw", "geometry", "fragment")], ["fb"])
+    plan.add(0, "depth_test", "fb", n, 1, lambda i, s: pixels[i] * 4, 4)
+    plan.add(0, "store", "fb", np.arange(0, n, 3), 1, lambda i, s: pixels[i * 3] * 4, 4, dep=True)
+    gpu = load_gpu("gtx280", SIMPLE)
+    result = _Result(plan, {"fb": 64 * 64 * 4})
+    work = Workload(plan, result.bases(), 64, 64, pixels, np.zeros(n, np.int64), triangles=1)
+    program = lower(work, gpu)
+    rec = analytic_timing(result, work, gpu)
+    assert rec["passes"][0]["warps"] == program.passes[0].warps == 4
+    assert rec["instructions"] == program.instructions == 4 + 4
+
+
+def test_requests_are_the_coalescers_sectors():
+    # 32 threads each read 8 entries of 20 B in a row (a k-buffer pixel's): some straddle a 32-byte segment, some
+    # two sectors of one; the requests and their bytes are the coalescer's, so is the DRAM's bound
+    plan = OpPlan([Pass("read", "fullscreen", "pixel")], ["k"])
+    plan.add(0, "load", "k", 32, 8, lambda i, s: i * 160 + s * 20, 20)
+    gpu = load_gpu("gtx280", SIMPLE)
+    result = _Result(plan, {"k": 32 * 160})
+    work = Workload(plan, result.bases(), 64, 64, np.zeros(32, np.int64), np.arange(32), triangles=0)
+    machine = Machine(gpu, lower(work, gpu), 64)
+    machine.run()
+    (bounds, _), = [_PassTimer(result, work, gpu).time(0)["terms"]]
+    assert bounds["dram"] * 32 == sum(machine.units["coalescer"].bytes)

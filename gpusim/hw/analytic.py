@@ -7,7 +7,12 @@ largest of
 
 * issue: warp instructions (per warp, the most operations any of its lanes
   issues in the group, so divergence counts) x issue cycles, plus ALU work
-  (compute groups: the busiest lane's instructions per warp), over the SMs;
+  (compute groups: the busiest lane's instructions per warp), on the busiest SM
+  (warps dealt round the SMs). The warps are the pass's as lowering packs its
+  lanes: a pixel shader's fragments spread over the warps of their 2x2 quads'
+  lanes (helper lanes), warps of consecutive triangles for a software
+  rasterizer, the scoreboard's dispatch; a group on some of the lanes issues in
+  every warp that holds one of them;
 * latency: each lane's dependent chain (an operation that waits for a result
   adds that unit's round trip; a memory operation also its warp instruction's
   requests on its busiest partition, served back to back; an atomic one its
@@ -16,11 +21,11 @@ largest of
   hide each other; a triangle thread's warp (software rasterizer) first loads
   its triangles' indices, then vertices, and runs the setup and its largest
   bounding box's scan;
-* dram: requests (lanes of a warp instruction on one ``coalescer.segment_bytes``
-  segment, an access over a segment boundary on two, measured on every
-  operation of the lanes of a sample of warps in runs spread over the group)
-  x bytes, over all channels; with an L2, only its misses (and the dirty lines
-  they evict);
+* dram: requests as the coalescer makes them (one per warp instruction and
+  ``coalescer.segment_bytes`` segment its lanes touch, of their bytes there in
+  whole sectors), measured on every operation of the lanes of a sample of warps
+  in runs spread over the group, x bytes, over all channels; with an L2, only
+  its misses (and the dirty lines they evict);
 * l2: with an L2, every request's bytes through the slices (see
   :class:`_L2Model` for its hits);
 * atomic: operations over all atomic units, and the hottest address
@@ -126,6 +131,27 @@ def _sorted_distinct(a: np.ndarray) -> np.ndarray:
     return a[np.r_[True, a[1:] != a[:-1]]] if len(a) else a
 
 
+def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: int) -> tuple[np.ndarray, np.ndarray]:
+    """The coalescer's requests of accesses (warp instruction ``inst``, byte ``addr``, ``nbytes`` each): one per
+    instruction and segment touched (an access over a segment boundary touches several), of the bytes its lanes
+    touch there rounded up to sectors, at most the segment; (request keys ``inst << 36 | segment``, ascending, and
+    their bytes)."""
+    seg = addr // segment
+    span = (addr + nbytes - 1) // segment - seg + 1
+    if (span > 1).any():
+        k = np.arange(int(span.sum())) - np.repeat(np.cumsum(span) - span, span)
+        inst, addr, nbytes = np.repeat(inst, span), np.repeat(addr, span), np.repeat(nbytes, span)
+        seg = np.repeat(seg, span) + k
+        nbytes = np.minimum(addr + nbytes, (seg + 1) * segment) - np.maximum(addr, seg * segment)
+    key = (inst << 36) + seg
+    if len(key) > 1 and not (key[1:] >= key[:-1]).all():
+        order = np.argsort(key)
+        key, nbytes = key[order], nbytes[order]
+    starts = run_starts(key)
+    touched = np.add.reduceat(nbytes, starts) if len(key) else nbytes
+    return key[starts], np.minimum(-(-touched // SECTOR) * SECTOR, max(segment, SECTOR))
+
+
 def _hottest(addr: np.ndarray) -> int:
     """Most operations on one address."""
     ops = address_ids(addr)[1]
@@ -142,32 +168,11 @@ def _warp_max(values: np.ndarray, ws: int) -> np.ndarray:
 
 
 class _Packing:
-    """How a pass's lanes fill warps: ``ws`` consecutive lanes a warp, or (a pass behind the scoreboard)
-    as dispatch packs them, no two fragments of one cell in a warp (gpusim.hw.lower)."""
+    """How a pass's lanes fill warps: ``ws`` consecutive lanes a warp, or (a pass behind the scoreboard) as
+    dispatch packs them, no two fragments of one cell in a warp (gpusim.hw.lower): ``warp`` of each of ``keys``."""
 
     def __init__(self, ws: int, keys: np.ndarray | None = None, warp: np.ndarray | None = None):
         self.ws, self.keys, self.warp = ws, keys, warp
-
-    def runs(self, keys: np.ndarray) -> np.ndarray:
-        """Start of each warp's run in ``keys`` (ascending lane keys of the pass)."""
-        if self.warp is None:
-            return np.arange(0, len(keys), self.ws)
-        return run_starts(self.warp[np.searchsorted(self.keys, keys)])
-
-    def warp_max(self, values: np.ndarray, keys: np.ndarray) -> np.ndarray:
-        """Per warp, the largest of its lanes' ``values`` (one per key of ``keys``)."""
-        if self.warp is None:
-            return _warp_max(values, self.ws)
-        return np.maximum.reduceat(values, self.runs(keys)) if len(values) else values
-
-    def warp_rank(self, keys: np.ndarray, of: np.ndarray) -> np.ndarray:
-        """The warp (its rank among the warps of ``keys``) of each key in ``of``."""
-        pos = np.searchsorted(keys, of)
-        if self.warp is None:
-            return pos // self.ws
-        starts = np.zeros(len(keys), np.int64)
-        starts[self.runs(keys)] = 1
-        return (np.cumsum(starts) - 1)[pos]
 
 
 SEG_MASK = (1 << 36) - 1  # a request key's segment (below its warp instruction)
@@ -257,8 +262,7 @@ def _pass_packing(plan, groups: list[int], placement, p: int, work, gpu) -> _Pac
     return _Packing(gpu.core.warp_size, keys, scoreboard_warps(work.frag_pixel[keys], work.width, gpu))
 
 
-def _scoreboard_bound(held: list, keys: np.ndarray, wchain: np.ndarray, packing: "_Packing",
-                      entries: int) -> tuple[float, float]:
+def _scoreboard_bound(held: list, warp_of, wchain: np.ndarray, entries: int) -> tuple[float, float]:
     """The scoreboard's serialisation: (the busiest cell's and the entries' bound, the conflicts' bound).
 
     A warp holds its fragments' cells for its whole latency chain, so the fragments of one cell run one warp after
@@ -270,7 +274,7 @@ def _scoreboard_bound(held: list, keys: np.ndarray, wchain: np.ndarray, packing:
     chain after the last warp before it on each of its cells ended (the longest such path)."""
     worst = conflicts = 0.0
     for held_keys, cells in held:
-        warp = packing.warp_rank(keys, held_keys)
+        warp = warp_of(held_keys)
         worst = max(worst, float(np.bincount(cells, weights=wchain[warp]).max(initial=0.0)))
         span = int(cells.max(initial=0)) + 1
         pairs = _sorted_distinct(warp * span + cells)      # (warp, cell) held
@@ -317,6 +321,58 @@ def _conflict_rounds(warp: np.ndarray, cell: np.ndarray, chain: np.ndarray) -> f
         free_at[cell_of[mine]] = end[pw[mine]]
         pw, cell_of = pw[~mine], cell_of[~mine]
     return float(end.max())
+
+
+class _PassWarps:
+    """The warps of a pass as lowering packs its lanes (``keys``: the pass's lane keys, ascending): a pixel
+    shader's fragments spread evenly over the warps of their 2x2 quads' lanes (helper lanes included), a
+    software rasterizer's warps of ``warp_size`` consecutive triangles (``triangles`` of them, those without a
+    fragment included), the scoreboard's dispatch (``packing``), or ``warp_size`` consecutive lanes."""
+
+    def __init__(self, mapping: str, keys: np.ndarray, packing: _Packing, ws: int, triangles: int, quads, work):
+        self.keys, self.ws, self.quads = keys, ws, 0
+        self.scale = None                     # (warps, lanes): a lane's warp is its rank x warps // lanes
+        self.contiguous = len(keys) > 0 and int(keys[-1]) - int(keys[0]) + 1 == len(keys)
+        if mapping == "fragment" and len(keys):
+            self.quads = quads.quads(keys, work)
+        if packing.warp is not None:
+            self.mode, self.packing = "dispatch", packing
+            self.n = int(packing.warp.max(initial=-1)) + 1
+        elif mapping == "triangle":
+            self.mode, self.n = "triangle", -(-triangles // ws)
+        elif mapping == "fragment" and len(keys):
+            self.mode = "spread"
+            self.n = min(len(keys), max(1, -(-4 * self.quads // ws)))
+            self.scale = (self.n, len(keys))
+        else:
+            self.mode, self.n = "consecutive", -(-len(keys) // ws)
+
+    def rank(self, keys: np.ndarray) -> np.ndarray:
+        """The position of each key among the pass's."""
+        if self.contiguous:
+            return keys - int(self.keys[0])
+        return np.searchsorted(self.keys, keys)
+
+    def of(self, keys: np.ndarray) -> np.ndarray:
+        """The warp of each lane key."""
+        if self.mode == "triangle":
+            return keys // self.ws
+        if self.mode == "dispatch":
+            return self.packing.warp[np.searchsorted(self.packing.keys, keys)]
+        if self.mode == "spread":
+            return self.rank(keys) * self.scale[0] // self.scale[1]
+        return self.rank(keys) // self.ws
+
+    def max_of(self, values, keys: np.ndarray) -> np.ndarray:
+        """Per warp of the pass, the largest of its lanes' ``values`` (one per key of ascending ``keys``, or one
+        for all), 0 in a warp without one of them."""
+        out = np.zeros(self.n)
+        if not len(keys):
+            return out
+        w = self.of(keys)
+        runs = run_starts(w)
+        out[w[runs]] = values if np.ndim(values) == 0 else np.maximum.reduceat(values, runs)
+        return out
 
 
 def _take(values: np.ndarray, idx) -> np.ndarray:
@@ -691,6 +747,7 @@ class _PassTimer:
         steps = 0                             # instructions a warp has issued before the group (the busiest lane's)
         adds: list = []                       # each group's lane info, dependent-chain cycles per lane, threads
         pass_keys: list = []                  # the lane keys of each group in the pass
+        met: list = []                        # each group's threads, selection, lanes and counts in the pass
         held: list = []                       # scoreboard groups: (lane keys, cell of each)
         packing = _pass_packing(plan, groups_of_pass[p], placement, p, work, gpu)
         still: dict = {}                      # the threads still issuing, by count array and op
@@ -755,15 +812,14 @@ class _PassTimer:
                     lo = int(lanes[0])          # lane keys from lo (a batch's fragments are a slice of them)
                     size = int(lanes[-1]) + 1 - lo
                     present, threads_in, keys = None, None, lanes
-                    warp_threads = -(-len(lanes) // ws) if packing.warp is None else \
-                        packing.warp_max(np.ones(len(lanes), np.int64), keys).sum()
+                    warp_threads = 0
                 else:
                     lo = int(lanes.min())
                     size = int(lanes.max()) + 1 - lo
                     threads_in = np.bincount(lanes - lo, minlength=size)
                     present = np.flatnonzero(threads_in)
                     threads_in, keys = threads_in[present], lo + present
-                    warp_threads = packing.warp_max(threads_in, keys).sum()
+                    warp_threads = 0
                 got = (lanes, lo, size, threads_in, present, warp_threads, keys, distinct)
                 cached.append((thread, memo, got))
                 if sel is None and packing.warp is None:
@@ -772,6 +828,19 @@ class _PassTimer:
                 made_lanes[id(sel)] = (sel, thread, triangles, got)
             lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
             pass_keys.append(keys)
+            met.append((gi, g, thread, sel, issuing, known, compute, cls, produces, nb, lanes_sel, counts, got, n))
+        self.last_still, self.sel_lanes = list(still.values()), made_lanes
+        if not met:
+            return {"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"}
+        # the pass's warps, as lowering packs them (helper lanes, triangles, the scoreboard's dispatch)
+        mapping = thread_mapping(gpu, pk)
+        lane_keys = _lane_keys(pass_keys)
+        tris = (submitted_triangles(pk, work) if pk.primitives is None else int(lane_keys.max()) + 1) \
+            if triangles else 0
+        warps = _PassWarps(mapping, lane_keys, packing, ws, tris, quad_memo, work)
+        warp_issue = np.zeros(warps.n)        # each warp's cycles on its SM's issue port
+        for gi, g, thread, sel, issuing, known, compute, cls, produces, nb, lanes_sel, counts, got, n in met:
+            lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
             c0, uniform = _uniform(counts)
             # per present lane: its operations (not needed when every lane runs one thread with the same count)
             if uniform:
@@ -780,15 +849,18 @@ class _PassTimer:
                 per_lane = np.asarray(counts, np.float64)
             else:
                 per_lane = np.bincount(lanes - lo, weights=counts, minlength=size)[present]
-            # warp instructions: lanes in order, each warp issues its busiest lane's count
-            busiest = warp_threads * c0 if uniform else packing.warp_max(per_lane, keys).sum()
+            # warp instructions: each warp of the pass holding the group's lanes issues its busiest lane's count
+            per_warp = warps.max_of(c0 if per_lane is None else per_lane, keys)
+            busiest = float(per_warp.sum())
             if compute:
                 alu[p] += busiest * alu_cost
+                warp_issue += per_warp * alu_cost
             else:
                 wis[p] += busiest
+                warp_issue += per_warp * cost
             at, steps = steps, steps + (1 if compute else (c0 if uniform else int(counts.max(initial=0))))
             ops = float(c0 * len(counts) if uniform else counts.sum())
-            # first operation of each thread: coalescing (on a spread sample of warps) and the hottest address
+            # coalescing (on a spread sample of warps), the hottest address, the units' loads
             # threads with no operation in this group have no address (a list walk of zero nodes)
             live = None if not len(counts) or (c0 if uniform else int(counts.min())) > 0 else counts > 0
             lanes_live = lanes_sel if live is None else lanes_sel[live]
@@ -804,19 +876,13 @@ class _PassTimer:
                 # the sampled lanes: a thread's later operations may straddle segments its first does not)
                 i_s, seq_s, pos_s = _op_sample(lanes_live, counts_live, ws,
                                                g.seq_pass is None and g.pass_fn is None)
-                warp_s = pos_s // ws if lane_inst is None else lane_inst[pos_s]
+                warp_s = warps.of(thread[i_s]) if lane_inst is None else lane_inst[pos_s]
                 addr = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
-                nb_s = nb if nb is not None else np.asarray(g.bytes(i_s, seq_s), np.int64)
-                bytes_ = float(nb) if nb is not None else float(np.mean(nb_s))
-                seg = addr // segment
-                end = (addr + np.maximum(nb_s, 1) - 1) // segment
+                nb_s = np.broadcast_to(np.asarray(nb if nb is not None else g.bytes(i_s, seq_s), np.int64),
+                                       addr.shape)
                 inst = warp_s * (int(seq_s.max(initial=0)) + 1) + seq_s    # the warp instruction of each
-                wkey = (inst << 36) + seg
-                wide = end > seg                        # an access over a segment boundary touches two
-                if wide.any():
-                    wkey = np.concatenate([wkey, (inst[wide] << 36) + end[wide]])
-                wkey = _sorted_distinct(wkey)           # the sample's requests
-                requests_per_lane = len(wkey) / max(1, len(seg))
+                wkey, req_b = _requests(inst, addr, np.maximum(nb_s, 1), segment)
+                requests_per_lane = len(wkey) / max(1, len(addr))
                 # a warp instruction's requests to one partition are served back to back before its result is
                 # back: the busiest partition's requests of each instruction, on average
                 cell = (wkey >> 36) * m.partitions + interleave((wkey & SEG_MASK) * segment, m.interleave_bytes,
@@ -826,11 +892,10 @@ class _PassTimer:
                 per_cell = np.diff(np.append(starts, len(cell)))
                 runs = run_starts(cell[starts] // m.partitions)
                 own = float(np.maximum.reduceat(per_cell, runs).mean()) if len(runs) else 0.0
-                req_bytes = min(max(segment, SECTOR),
-                                -(-bytes_ / requests_per_lane // SECTOR) * SECTOR)
+                req_bytes = float(req_b.mean()) if len(req_b) else float(SECTOR)
                 requests = ops * requests_per_lane
                 per_request, miss = l2.misses(g.structure, (thread, sel), ops, requests, req_bytes, addr, warp_s,
-                                              seq_s, -(-len(lanes_live) // ws), at)
+                                              seq_s, warps.n, at)
                 l2_bytes[p] += requests * req_bytes
                 dram_bytes[p] += requests * per_request
                 mem_lat = self.l2.latency(miss) + own * self.l2.service(req_bytes, miss)
@@ -850,7 +915,7 @@ class _PassTimer:
                                                g.seq_pass is None and g.pass_fn is None)
                 words = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
                 steps_ = int(seq_s.max(initial=0)) + 1
-                inst = (pos_s // ws if lane_inst is None else lane_inst[pos_s]) * steps_ + seq_s
+                inst = (warps.of(thread[i_s]) if lane_inst is None else lane_inst[pos_s]) * steps_ + seq_s
                 key = np.sort((inst << 36) + (words & SEG_MASK))
                 starts = run_starts(key)
                 per_word = np.diff(np.append(starts, len(key)))
@@ -898,43 +963,36 @@ class _PassTimer:
                 last_producer, last_serial, waited = unit_lat, serial, False
             elif g.dep:
                 waited = True
-        self.last_still, self.sel_lanes = list(still.values()), made_lanes
         if not adds:
             return {"name": pk.name, "kind": pk.kind, "cycles": overhead, "warps": 0, "bound": "empty"}
         chain = _chain_on_lanes(adds, nested)
         chain_keys, lane_chain = chain if chain is not None else _chain_on_range(adds)
         del adds, chain
-        mapping = thread_mapping(gpu, pk)
-        keys = _lane_keys(pass_keys) if mapping in ("fragment", "triangle") else np.zeros(0, np.int64)
+        wchain = warps.max_of(lane_chain, chain_keys)
         if mapping == "triangle":
             # software rasterizer: a thread per submitted triangle (warps of consecutive triangles, those that cover
             # no pixel included) loads its indices, then its vertices, sets up and scans its bounding box (a warp
             # its largest box) before its fragments' operations
             r = gpu.raster
-            tris = submitted_triangles(pk, work) if pk.primitives is None else int(keys.max()) + 1
             frags = _union([ids[i] for i in groups_of_pass[p]])
             box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
-            setup_w = c.alu_cycles(r.setup_instructions + r.pixel_instructions * _warp_max(box, ws))
-            sw_warps = -(-tris // ws)
+            setup_w = _warp_max(box, ws) * (r.pixel_instructions * alu_cost) + r.setup_instructions * alu_cost
             vertex_dram, vertex_miss = l2.vertex_misses(tris)
-            wchain = np.zeros(sw_warps)
-            wk = chain_keys // ws
-            if len(wk):
-                runs = run_starts(wk)
-                wchain[wk[runs]] = np.maximum.reduceat(lane_chain, runs)
             # the index load's round trip, then the vertex load's, each with its instruction's requests on the
             # busiest partition (the warp's triangles' bytes are contiguous)
             fetch = [self._contiguous_round_trip(min(ws, tris) * nb, vertex_miss)
                      for nb in (INDEX_BYTES, 3 * r.vertex_bytes)]
-            wchain += 2 * cost + sum(fetch) + setup_w
-        else:
-            wchain = packing.warp_max(lane_chain, chain_keys)
+            wchain += 2 * cost + sum(fetch) + c.alu_cycles(r.setup_instructions + r.pixel_instructions
+                                                           * _warp_max(box, ws))
+            warp_issue += 2 * cost + setup_w
+            wis[p] += 2 * warps.n
+            alu[p] += float(setup_w.sum())
         n_warps = len(wchain)
         sm = SimtCore.place(n_warps, c.sms)
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
         n_sm = np.bincount(sm, minlength=c.sms)
         bounds = {
-            "issue": float(np.ceil(wis[p] / min(c.sms, n_warps)) * cost + alu[p] / min(c.sms, n_warps)),
+            "issue": float(np.bincount(sm, weights=warp_issue, minlength=c.sms).max()),
             "latency": float(max(wchain.max(), (per_sm / np.maximum(1, np.minimum(n_sm, c.warps_per_sm))).max())),
             "dram": dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions),
             "atomic": atomic_ops[p] / (gpu.atomic.ops_per_cycle * m.partitions),
@@ -943,16 +1001,12 @@ class _PassTimer:
         }
         if held:
             bounds["scoreboard"], bounds["scoreboard_conflicts"] = _scoreboard_bound(
-                held, chain_keys, wchain, packing, gpu.scoreboard.entries)
-        if mapping == "fragment" and len(keys) and packing.warp is None:
-            # the front end sees every triangle; the pixel shader runs 4 lanes per 2x2 quad (helper lanes)
-            quads = quad_memo.quads(keys, work)
-            bounds["issue"] *= max(1.0, 4 * quads / len(keys))
+                held, warps.of, wchain, gpu.scoreboard.entries)
+        if mapping == "fragment" and len(lane_keys):
+            # the front end sees every triangle, and emits the fragments' 2x2 quads
             bounds["raster"] = max(submitted_triangles(pk, work) * per_triangle_cycles(gpu),
-                                   quads / gpu.raster.quads_per_cycle)
+                                   warps.quads / gpu.raster.quads_per_cycle)
         elif mapping == "triangle":
-            setup = float((r.setup_instructions + r.pixel_instructions * _warp_max(box, ws)).sum()) * alu_cost
-            bounds["issue"] += (setup + 2 * sw_warps * cost) / min(c.sms, sw_warps)
             vertex_bytes = tris * (INDEX_BYTES + 3 * r.vertex_bytes)
             l2_bytes[p] += vertex_bytes
             dram_bytes[p] += vertex_bytes * vertex_dram
