@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gpusim.hw import load_gpu
-from gpusim.hw.analytic import _PassTimer, _usable_sets, analytic_timing
+from gpusim.hw.analytic import _PassTimer, _fed, _usable_sets, analytic_timing
 from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine
 from gpusim.opplan import OpPlan, Pass, layout_bases
@@ -198,3 +198,32 @@ def test_requests_are_the_coalescers_sectors():
     machine.run()
     (bounds, _), = [_PassTimer(result, work, gpu).time(0)["terms"]]
     assert bounds["dram"] * 32 == sum(machine.units["coalescer"].bytes)
+
+
+def test_a_unit_serves_a_warps_work_once_the_front_end_has_it_out():
+    # 16 full quads (an 8x8 block), two warps of 32 lanes storing 64 B each (64 cycles of the DRAM a warp); the
+    # first warp's triangle is the first of 1,000 at 2 cycles each, the second warp's the last: it is out at cycle
+    # 2,000, and its stores take their 64 cycles after that (the DRAM's bound, 128, and the front end's, 2,000,
+    # overlap only where the work has arrived)
+    xy = [(x, y) for y in range(8) for x in range(8)]
+    order = sorted(range(64), key=lambda i: ((xy[i][1] // 2) * 4 + xy[i][0] // 2, i))
+    pixels = np.array([xy[i][1] * 64 + xy[i][0] for i in order])
+    plan = OpPlan([Pass("draw", "geometry", "fragment")], ["fb"])
+    plan.add(0, "store", "fb", 64, 1, lambda i, s: i * 64, 64)
+    gpu = load_gpu("gtx280", SIMPLE + ["raster.triangles_per_cycle=0.5", "raster.vertex_instructions=0",
+                                       "raster.vertex_bytes=0"])
+    result = _Result(plan, {"fb": 64 * 64})
+    work = Workload(plan, result.bases(), 64, 64, pixels, np.array([0] * 32 + [999] * 32), triangles=1000)
+    full = Machine(gpu, lower(work, gpu), 64).run()
+    rec = _PassTimer(result, work, gpu).time(0)
+    bounds, extra = rec["terms"]
+    assert bounds["raster"] == 2000 and bounds["dram"] == 128 and bounds["front_end"] == 2000 + 64
+    assert rec["bound"] == "front_end" and rec["cycles"] == 2064 + extra == full
+
+
+def test_a_queue_fed_by_the_front_end():
+    # the largest over warps j of when j is out plus the work of the warps from j on, per server
+    ready, demand = np.array([0.0, 0.0, 100.0]), np.array([50.0, 50.0, 10.0])
+    assert _fed(ready, demand, 1) == max(0 + 110, 0 + 60, 100 + 10)
+    assert _fed(ready, demand, 2) == max(max(0 + 60, 100 + 10), 0 + 50)      # warps 0 and 2 on one server
+    assert _fed(ready, np.array([50.0, 50.0, 50.0]), 1) == 150

@@ -36,6 +36,10 @@ largest of
   passes, whose issue bound counts the helper lanes of 2x2 quads); a software
   rasterizer's vertex loads, setup and bounding-box scan on the SMs (triangle
   mapping, in the issue and dram bounds);
+* front_end: in a pixel shader's pass, a warp starts once the front end has its
+  fragments out, so each unit (an SM's issue port, the DRAM, the L2, the atomic
+  units, the busiest ROP) serves a warp's work only after that: when such a
+  queue fed in warp order is done (:func:`_fed`), or the last warps' chains end;
 
 plus one round trip of the slowest unit the pass uses (a memory request's at
 the pass's L2 miss ratio) and the driver's ``driver.pass_us``. Imbalance across
@@ -50,7 +54,8 @@ import numpy as np
 from gpusim.hw.collector import collector_paused
 from gpusim.hw.core import SimtCore, flush_cycles
 from gpusim.hw.driver import pass_overhead_cycles
-from gpusim.hw.lower import PRODUCES, scoreboard_warps, submitted_triangles, thread_mapping
+from gpusim.hw.lower import (PRODUCES, _quads_so_far, _raster_positions, scoreboard_warps, submitted_triangles,
+                             thread_mapping)
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.memory.coalescer import WRITE_OPS
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_triangle_cycles
@@ -363,6 +368,19 @@ class _PassWarps:
             return self.rank(keys) * self.scale[0] // self.scale[1]
         return self.rank(keys) // self.ws
 
+    def sum_of(self, values, keys: np.ndarray) -> np.ndarray:
+        """Per warp of the pass, the sum of its lanes' ``values`` (one per key of ascending ``keys``, or one for
+        all)."""
+        out = np.zeros(self.n)
+        if not len(keys):
+            return out
+        w = self.of(keys)
+        if np.ndim(values) == 0:
+            return out + np.bincount(w, minlength=self.n) * float(values)
+        runs = run_starts(w)
+        out[w[runs]] = np.add.reduceat(np.asarray(values, np.float64), runs)
+        return out
+
     def max_of(self, values, keys: np.ndarray) -> np.ndarray:
         """Per warp of the pass, the largest of its lanes' ``values`` (one per key of ascending ``keys``, or one
         for all), 0 in a warp without one of them."""
@@ -372,6 +390,45 @@ class _PassWarps:
         w = self.of(keys)
         runs = run_starts(w)
         out[w[runs]] = values if np.ndim(values) == 0 else np.maximum.reduceat(values, runs)
+        return out
+
+
+def _fed(ready: np.ndarray, demand: np.ndarray, servers: int) -> float:
+    """When a unit that serves each warp's ``demand`` (cycles) once the warp is ``ready``, in warp order, is done:
+    the largest over warps ``j`` of ``ready[j]`` plus the demand of the warps from ``j`` on (a queue fed by the
+    front end). ``servers``: instances the warps are dealt round (an SM's issue port each), else one."""
+    n = len(ready)
+    if not n:
+        return 0.0
+    k = -(-n // servers)
+    pad = k * servers - n
+    r = np.append(ready, np.full(pad, -np.inf)).reshape(k, servers)
+    d = np.append(demand, np.zeros(pad)).reshape(k, servers)
+    before = np.cumsum(d, axis=0) - d
+    return float((d.sum(axis=0) + (r - before).max(axis=0)).max())
+
+
+class _ReadyMemo:
+    """Per warp of a pixel shader's pass, the cycle the front end has its fragments out (as the full model's
+    front end: every stage's cumulative time at the warp's last triangle, or its quads so far at the
+    rasterizer's rate), kept for passes over the same fragments."""
+
+    def __init__(self):
+        self.last: tuple = (None, None, None)
+
+    def ready(self, pk, keys: np.ndarray, warps: "_PassWarps", work, gpu) -> np.ndarray:
+        memo = (keys, submitted_triangles(pk, work), warps.n)
+        if self.last[0] is keys and self.last[1] == memo[1:]:
+            return self.last[2]
+        _, position = _raster_positions(work, pk, keys)
+        quads = _quads_so_far(work, keys)
+        w = warps.of(keys)
+        runs = run_starts(w)
+        out = np.zeros(warps.n)
+        out[w[runs]] = np.maximum(np.maximum.reduceat(position, runs) * per_triangle_cycles(gpu),
+                                  np.maximum.reduceat(quads, runs) / gpu.raster.quads_per_cycle)
+        out = np.maximum.accumulate(out)     # a warp with no lane of its own: when the one before it is
+        self.last = (keys, memo[1:], out)
         return out
 
 
@@ -706,6 +763,7 @@ class _PassTimer:
                 self.groups_of_pass[p].append(gi)
         self.overhead = pass_overhead_cycles(gpu)      # the driver issues each pass
         self.quad_memo = _QuadMemo()           # passes over the same fragments (depth peeling's) share their quads
+        self.ready_memo = _ReadyMemo()         # and the cycles the front end has each warp's fragments out
         self.whole_groups: list = []           # the last groups met whole: (threads, triangle mapping, lane info)
         self.nested: dict = {}                 # each count array's threads still issuing, as the last pass had them
         self.last_still: list = []             # the threads still issuing of the last pass timed
@@ -839,6 +897,8 @@ class _PassTimer:
             if triangles else 0
         warps = _PassWarps(mapping, lane_keys, packing, ws, tris, quad_memo, work)
         warp_issue = np.zeros(warps.n)        # each warp's cycles on its SM's issue port
+        fed = mapping == "fragment" and len(lane_keys) > 0     # the front end feeds the warps at its rate
+        demand = {u: np.zeros(warps.n) for u in ("dram", "l2", "atomic", "rop")} if fed else None
         for gi, g, thread, sel, issuing, known, compute, cls, produces, nb, lanes_sel, counts, got, n in met:
             lanes, lo, size, threads_in, present, warp_threads, keys, distinct = got
             c0, uniform = _uniform(counts)
@@ -860,6 +920,7 @@ class _PassTimer:
                 warp_issue += per_warp * cost
             at, steps = steps, steps + (1 if compute else (c0 if uniform else int(counts.max(initial=0))))
             ops = float(c0 * len(counts) if uniform else counts.sum())
+            warp_ops = warps.sum_of(c0 if per_lane is None else per_lane, keys) if fed and not compute else None
             # coalescing (on a spread sample of warps), the hottest address, the units' loads
             # threads with no operation in this group have no address (a list walk of zero nodes)
             live = None if not len(counts) or (c0 if uniform else int(counts.min())) > 0 else counts > 0
@@ -898,6 +959,10 @@ class _PassTimer:
                                               seq_s, warps.n, at)
                 l2_bytes[p] += requests * req_bytes
                 dram_bytes[p] += requests * per_request
+                if warp_ops is not None:
+                    demand["l2"] += warp_ops * (requests_per_lane * req_bytes / (gpu.l2.bytes_per_cycle * m.partitions))
+                    demand["dram"] += warp_ops * (requests_per_lane * per_request
+                                                  / (gpu.dram.bytes_per_cycle * m.partitions))
                 mem_lat = self.l2.latency(miss) + own * self.l2.service(req_bytes, miss)
             elif cls == ROP and g.seq_pass is not None and len(placement[gi][2]) > 1:
                 addr = None
@@ -908,6 +973,8 @@ class _PassTimer:
                 pass
             elif cls == ATOMIC:
                 atomic_ops[p] += ops
+                if warp_ops is not None:
+                    demand["atomic"] += warp_ops / (gpu.atomic.ops_per_cycle * m.partitions)
                 hottest[p] = max(hottest[p], float(_hottest(addr)))
                 # lanes of one instruction on one word serialize: the instruction's result waits for its busiest
                 # word's operations, same_address_cycles apart
@@ -937,7 +1004,10 @@ class _PassTimer:
                     unit = interleave(addr, m.interleave_bytes, gpu.rop.units)
                 svc = (gpu.blender.cycles_per_op + (nb or 0) / gpu.blender.bytes_per_cycle
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
-                rop_unit[p] += np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
+                load = np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
+                rop_unit[p] += load
+                if warp_ops is not None and load.sum():
+                    demand["rop"] += warp_ops * (svc * load.max() / load.sum())     # at the busiest unit's share
             elif cls == SCOREBOARD:
                 keys_live = thread[lanes_live]
                 held.append((keys_live, scoreboard_cell(work.frag_pixel[keys_live], work.width,
@@ -1002,10 +1072,16 @@ class _PassTimer:
         if held:
             bounds["scoreboard"], bounds["scoreboard_conflicts"] = _scoreboard_bound(
                 held, warps.of, wchain, gpu.scoreboard.entries)
-        if mapping == "fragment" and len(lane_keys):
+        if fed:
             # the front end sees every triangle, and emits the fragments' 2x2 quads
             bounds["raster"] = max(submitted_triangles(pk, work) * per_triangle_cycles(gpu),
                                    warps.quads / gpu.raster.quads_per_cycle)
+            # a warp starts once the front end has its fragments out, so a unit serves each warp's work only after
+            # that, and the last warps' chains run after the front end is done
+            ready = self.ready_memo.ready(pk, lane_keys, warps, work, gpu)
+            demand["issue"] = warp_issue
+            bounds["front_end"] = max(float((ready + wchain).max()),
+                                      *(_fed(ready, d, c.sms if u == "issue" else 1) for u, d in demand.items()))
         elif mapping == "triangle":
             vertex_bytes = tris * (INDEX_BYTES + 3 * r.vertex_bytes)
             l2_bytes[p] += vertex_bytes
