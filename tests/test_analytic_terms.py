@@ -200,30 +200,61 @@ def test_requests_are_the_coalescers_sectors():
     assert bounds["dram"] * 32 == sum(machine.units["coalescer"].bytes)
 
 
-def test_a_unit_serves_a_warps_work_once_the_front_end_has_it_out():
-    # 16 full quads (an 8x8 block), two warps of 32 lanes storing 64 B each (64 cycles of the DRAM a warp); the
-    # first warp's triangle is the first of 1,000 at 2 cycles each, the second warp's the last: it is out at cycle
-    # 2,000, and its stores take their 64 cycles after that (the DRAM's bound, 128, and the front end's, 2,000,
-    # overlap only where the work has arrived)
+def _two_warps(last_triangle, triangles, nbytes):
+    """16 full quads (an 8x8 block): two warps of 32 lanes each storing ``nbytes``; the first warp's triangle is
+    the first of ``triangles`` at 2 cycles each, the second warp's ``last_triangle``. (full cycles, pass record)"""
     xy = [(x, y) for y in range(8) for x in range(8)]
     order = sorted(range(64), key=lambda i: ((xy[i][1] // 2) * 4 + xy[i][0] // 2, i))
     pixels = np.array([xy[i][1] * 64 + xy[i][0] for i in order])
     plan = OpPlan([Pass("draw", "geometry", "fragment")], ["fb"])
-    plan.add(0, "store", "fb", 64, 1, lambda i, s: i * 64, 64)
+    plan.add(0, "store", "fb", 64, 1, lambda i, s: i * nbytes, nbytes)
     gpu = load_gpu("gtx280", SIMPLE + ["raster.triangles_per_cycle=0.5", "raster.vertex_instructions=0",
                                        "raster.vertex_bytes=0"])
-    result = _Result(plan, {"fb": 64 * 64})
-    work = Workload(plan, result.bases(), 64, 64, pixels, np.array([0] * 32 + [999] * 32), triangles=1000)
-    full = Machine(gpu, lower(work, gpu), 64).run()
-    rec = _PassTimer(result, work, gpu).time(0)
+    result = _Result(plan, {"fb": 64 * nbytes})
+    prims = np.array([0] * 32 + [last_triangle] * 32)
+    work = Workload(plan, result.bases(), 64, 64, pixels, prims, triangles=triangles)
+    return Machine(gpu, lower(work, gpu), 64).run(), _PassTimer(result, work, gpu).time(0)
+
+
+def test_a_unit_serves_a_warps_work_once_the_front_end_has_it_out():
+    # the second warp's triangle is the last of 1,000: out at cycle 2,000, and its stores (64 B a lane: 64 cycles
+    # of the DRAM a warp) take their 64 cycles after that: the raster bound's tail (the DRAM keeps up)
+    full, rec = _two_warps(999, 1000, 64)
     bounds, extra = rec["terms"]
-    assert bounds["raster"] == 2000 and bounds["dram"] == 128 and bounds["front_end"] == 2000 + 64
-    assert rec["bound"] == "front_end" and rec["cycles"] == 2064 + extra == full
+    assert bounds["dram"] == 128 and bounds["raster"] == 2000 + 64 and bounds["front_end"] == 0
+    assert rec["bound"] == "raster" and rec["cycles"] == 2064 + extra == full
+    # 128 B a lane, the second warp out at cycle 100 of 100: the first warp's 128 cycles of the DRAM are not done
+    # when the second's arrive (a backlog), so the DRAM serves both from cycle 2.15 on (the first warp's 8
+    # quads at 3.72 a cycle): front_end 2.15 + 256
+    full, rec = _two_warps(49, 50, 128)
+    bounds, extra = rec["terms"]
+    assert bounds["dram"] == 256 and bounds["raster"] == 100 + 1
+    assert bounds["front_end"] == pytest.approx(2.15 + 256, abs=0.01)
+    assert rec["bound"] == "front_end" and abs(rec["cycles"] / full - 1) < 0.02, (rec["cycles"], full)
 
 
 def test_a_queue_fed_by_the_front_end():
     # the largest over warps j of when j is out plus the work of the warps from j on, per server
+    # (and whether a warp before the last decides: a backlog, not the last warp's own work after the front end)
     ready, demand = np.array([0.0, 0.0, 100.0]), np.array([50.0, 50.0, 10.0])
-    assert _fed(ready, demand, 1) == max(0 + 110, 0 + 60, 100 + 10)
-    assert _fed(ready, demand, 2) == max(max(0 + 60, 100 + 10), 0 + 50)      # warps 0 and 2 on one server
-    assert _fed(ready, np.array([50.0, 50.0, 50.0]), 1) == 150
+    assert _fed(ready, demand, 1) == (max(0 + 110, 0 + 60, 100 + 10), False)       # the last warp's too
+    assert _fed(ready, np.array([60.0, 50.0, 10.0]), 1) == (120, True)
+    assert _fed(ready, demand, 2) == (max(max(0 + 60, 100 + 10), 0 + 50), False)     # warps 0, 2 on one server
+    assert _fed(ready, np.array([50.0, 50.0, 50.0]), 1) == (150, False)         # a tie: the front end
+    assert _fed(np.array([0.0, 10.0, 500.0]), np.array([5.0, 5.0, 5.0]), 1) == (505, False)
+
+
+def test_a_triangle_threads_warp_runs_each_iteration_as_long_as_its_longest_lane():
+    # two triangles of two fragments in one warp; their fragments loop 3, 1 and 1, 3 times on an atomicMin that
+    # waits for its result (1 + 50 cycles each): each lane runs 4, but the warp runs max(3, 1) + max(1, 3) = 6
+    pixels, prims = np.array([1, 2, 3, 4]), np.array([0, 0, 1, 1])
+    plan = OpPlan([Pass("draw", "geometry", "fragment", software=True)], ["c"])
+    plan.add(0, "atomic_min", "c", 4, np.array([3, 1, 1, 3]), lambda i, s: pixels[i] * 4, 4, dep=True)
+    gpu = load_gpu("gtx280", SIMPLE + ["raster.setup_instructions=0", "raster.pixel_instructions=0"])
+    result = _Result(plan, {"c": 64 * 64 * 4})
+    work = Workload(plan, result.bases(), 64, 64, pixels, prims, triangles=2)
+    full = Machine(gpu, lower(work, gpu), 64).run()
+    bounds, extra = _PassTimer(result, work, gpu).time(0)["terms"]
+    prefix = (1 + 100 + 1) + (1 + 100 + 3)         # the warp's 2 triangles' indices (32 B), vertices (96 B)
+    assert bounds["latency"] == prefix + 6 * (1 + 50)
+    assert abs(bounds["latency"] / full - 1) < 0.02, (bounds["latency"], full)

@@ -20,7 +20,8 @@ largest of
   the slowest warp, or the SM's warps' chains divided by the resident warps that
   hide each other; a triangle thread's warp (software rasterizer) first loads
   its triangles' indices, then vertices, and runs the setup and its largest
-  bounding box's scan;
+  bounding box's scan, then each iteration of its threads' loops as long as its
+  longest lane's fragment takes (SIMT);
 * dram: requests as the coalescer makes them (one per warp instruction and
   ``coalescer.segment_bytes`` segment its lanes touch, of their bytes there in
   whole sectors), measured on every operation of the lanes of a sample of warps
@@ -39,7 +40,9 @@ largest of
 * front_end: in a pixel shader's pass, a warp starts once the front end has its
   fragments out, so each unit (an SM's issue port, the DRAM, the L2, the atomic
   units, the busiest ROP) serves a warp's work only after that: when such a
-  queue fed in warp order is done (:func:`_fed`), or the last warps' chains end;
+  queue fed in warp order is done (:func:`_fed`) where the unit falls behind the
+  front end (otherwise the last warps' work and chains after the front end are
+  the raster bound's tail);
 
 plus one round trip of the slowest unit the pass uses (a memory request's at
 the pass's L2 miss ratio) and the driver's ``driver.pass_us``. Imbalance across
@@ -393,19 +396,25 @@ class _PassWarps:
         return out
 
 
-def _fed(ready: np.ndarray, demand: np.ndarray, servers: int) -> float:
+def _fed(ready: np.ndarray, demand: np.ndarray, servers: int) -> tuple[float, bool]:
     """When a unit that serves each warp's ``demand`` (cycles) once the warp is ``ready``, in warp order, is done:
     the largest over warps ``j`` of ``ready[j]`` plus the demand of the warps from ``j`` on (a queue fed by the
-    front end). ``servers``: instances the warps are dealt round (an SM's issue port each), else one."""
+    front end); and whether a backlog decides it (the largest is at a warp before the last: the unit fell behind
+    the front end), not the last warp's own work after the front end. ``servers``: instances the warps are dealt
+    round (an SM's issue port each), else one."""
     n = len(ready)
     if not n:
-        return 0.0
+        return 0.0, False
     k = -(-n // servers)
     pad = k * servers - n
     r = np.append(ready, np.full(pad, -np.inf)).reshape(k, servers)
     d = np.append(demand, np.zeros(pad)).reshape(k, servers)
     before = np.cumsum(d, axis=0) - d
-    return float((d.sum(axis=0) + (r - before).max(axis=0)).max())
+    start = r - before
+    done = d.sum(axis=0) + start.max(axis=0)
+    s = int(done.argmax())
+    last = k - 1 if s < servers - pad else k - 2          # the server's last warp
+    return float(done[s]), bool(start[last, s] < start[:, s].max())
 
 
 class _ReadyMemo:
@@ -897,6 +906,9 @@ class _PassTimer:
             if triangles else 0
         warps = _PassWarps(mapping, lane_keys, packing, ws, tris, quad_memo, work)
         warp_issue = np.zeros(warps.n)        # each warp's cycles on its SM's issue port
+        # triangle threads: each fragment's cycles in its iteration of the loop, and the warps' atomic waits
+        loop = np.zeros(len(work.frag_prim)) if triangles else None
+        loop_waits: list = []
         fed = mapping == "fragment" and len(lane_keys) > 0     # the front end feeds the warps at its rate
         demand = {u: np.zeros(warps.n) for u in ("dram", "l2", "atomic", "rop")} if fed else None
         for gi, g, thread, sel, issuing, known, compute, cls, produces, nb, lanes_sel, counts, got, n in met:
@@ -959,8 +971,9 @@ class _PassTimer:
                                               seq_s, warps.n, at)
                 l2_bytes[p] += requests * req_bytes
                 dram_bytes[p] += requests * per_request
-                if warp_ops is not None:
+                if warp_ops is not None and self.l2.present:
                     demand["l2"] += warp_ops * (requests_per_lane * req_bytes / (gpu.l2.bytes_per_cycle * m.partitions))
+                if warp_ops is not None:
                     demand["dram"] += warp_ops * (requests_per_lane * per_request
                                                   / (gpu.dram.bytes_per_cycle * m.partitions))
                 mem_lat = self.l2.latency(miss) + own * self.l2.service(req_bytes, miss)
@@ -1029,6 +1042,17 @@ class _PassTimer:
                     add = add + last_serial(keys)
             adds.append((got, add, (thread, issuing.count, issuing.s, sel) if known and issuing is not None
                          and g.seq_pass is not None else None))
+            if loop is not None:                 # each fragment's share of its triangle thread's iteration
+                fr = thread if sel is None else thread[lanes_sel]
+                step = np.asarray(counts, np.float64) * ((alu_cost if compute else cost)
+                                                         + (unit_lat if g.dep and produces else 0.0))
+                if g.dep and not produces and lp is not None and not waited:
+                    step = step + lp
+                loop[fr] += step
+                if g.dep and produces and serial is not None:
+                    loop_waits.append(serial)
+                elif g.dep and not produces and lp is not None and not waited and last_serial is not None:
+                    loop_waits.append(last_serial)
             if produces:
                 last_producer, last_serial, waited = unit_lat, serial, False
             elif g.dep:
@@ -1040,6 +1064,18 @@ class _PassTimer:
         del adds, chain
         wchain = warps.max_of(lane_chain, chain_keys)
         if mapping == "triangle":
+            # SIMT: a warp runs each iteration of its threads' loops as long as the longest of its lanes' j-th
+            # fragments takes, so its chain is the sum over iterations of the longest, not its longest lane's sum
+            frags = _union([ids[i] for i in groups_of_pass[p]])
+            inst, iterations = _loop_instructions(work.frag_prim[frags], ws)
+            order = np.argsort(inst, kind="stable")
+            inst, steps_of = inst[order], loop[frags][order]
+            runs = run_starts(inst)
+            longest = np.maximum.reduceat(steps_of, runs) if len(runs) else steps_of
+            by_iteration = np.bincount(inst[runs] // iterations, weights=longest, minlength=warps.n)[:warps.n]
+            for w_ in loop_waits:
+                by_iteration = by_iteration + w_(np.arange(warps.n) * ws)
+            wchain = np.maximum(wchain, by_iteration)
             # software rasterizer: a thread per submitted triangle (warps of consecutive triangles, those that cover
             # no pixel included) loads its indices, then its vertices, sets up and scans its bounding box (a warp
             # its largest box) before its fragments' operations
@@ -1080,8 +1116,12 @@ class _PassTimer:
             # that, and the last warps' chains run after the front end is done
             ready = self.ready_memo.ready(pk, lane_keys, warps, work, gpu)
             demand["issue"] = warp_issue
-            bounds["front_end"] = max(float((ready + wchain).max()),
-                                      *(_fed(ready, d, c.sms if u == "issue" else 1) for u, d in demand.items()))
+            fed_by = [_fed(ready, d, c.sms if u == "issue" else 1) for u, d in demand.items()]
+            # the front end's last warps' chains, and their own work, end after it (the raster bound's tail);
+            # a unit's backlog of work the front end fed faster than it serves is the front_end bound
+            bounds["raster"] = max(bounds["raster"], float((ready + wchain).max()),
+                                   *(v for v, backlog in fed_by if not backlog))
+            bounds["front_end"] = max((v for v, backlog in fed_by if backlog), default=0.0)
         elif mapping == "triangle":
             vertex_bytes = tris * (INDEX_BYTES + 3 * r.vertex_bytes)
             l2_bytes[p] += vertex_bytes
