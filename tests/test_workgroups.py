@@ -1,22 +1,19 @@
-"""Items dealt round robin over a workgroup's lanes (gpusim.schemes.common.workgroups)."""
+"""Work items on a workgroup's lanes (gpusim.schemes.common.workgroups)."""
 
 import numpy as np
-import pytest
 
-from gpusim.schemes.common.workgroups import Spread
-
-
-def test_items_are_dealt_round_robin_and_every_item_once():
-    # owner 7 has 5 items over 4 lanes (2, 1, 1, 1), owner 9 has 2 (two lanes of 1), owner 3 none
-    sp = Spread(np.array([7, 9, 3]), np.array([5, 2, 0]), 4)
-    assert sp.threads.tolist() == [28, 29, 30, 31, 36, 37]
-    assert sp.counts.tolist() == [2, 1, 1, 1, 1, 1]
-    i = np.repeat(np.arange(len(sp.counts)), sp.counts)
-    s = np.arange(len(i)) - np.repeat(np.cumsum(sp.counts) - sp.counts, sp.counts)
-    owner, item = sp.item(i, s)
-    assert sorted(zip(owner.tolist(), item.tolist())) == [(0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 0), (1, 1)]
+from gpusim.schemes.common.workgroups import Lanes, thread_totals
 
 
-def test_a_workgroup_needs_a_lane():
-    with pytest.raises(ValueError, match="size"):
-        Spread(np.array([0]), np.array([1]), 0)
+def test_lanes_give_each_thread_its_items_in_program_order():
+    # items 0..4 on threads 5, 3, 5, 3, 9; within a thread by the order key, then item number
+    ln = Lanes(np.array([5, 3, 5, 3, 9]), np.array([2, 1, 0, 1, 0]))
+    assert ln.threads.tolist() == [3, 5, 9] and ln.counts.tolist() == [2, 2, 1]
+    i, s = np.array([0, 0, 1, 1, 2]), np.array([0, 1, 0, 1, 0])
+    assert ln.item(i, s).tolist() == [1, 3, 2, 0, 4]
+
+
+def test_thread_totals_sum_a_threads_work():
+    threads, totals = thread_totals(np.array([7, 2, 7, 7]), np.array([1, 5, 2, 3]))
+    assert threads.tolist() == [2, 7] and totals.tolist() == [5, 6]
+    assert [a.tolist() for a in thread_totals(np.zeros(0, np.int64), np.zeros(0))] == [[], []]
