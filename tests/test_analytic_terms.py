@@ -258,3 +258,19 @@ def test_a_triangle_threads_warp_runs_each_iteration_as_long_as_its_longest_lane
     prefix = (1 + 100 + 1) + (1 + 100 + 3)         # the warp's 2 triangles' indices (32 B), vertices (96 B)
     assert bounds["latency"] == prefix + 6 * (1 + 50)
     assert abs(bounds["latency"] / full - 1) < 0.02, (bounds["latency"], full)
+
+
+def test_warps_resident_together_go_through_their_groups_in_step():
+    # 30 warps, one on each of 30 SMs, walk 4 dependent loads of 64 B (every warp a round trip apart, so the
+    # DRAM serves them in turn and they all end the walk together), then each runs 2,000 ALU cycles on its SM,
+    # then stores a word: the groups' units do not overlap, the phases add up: 7,680 + 2,000 + 120 cycles
+    n = 30 * 32
+    plan = OpPlan([Pass("resolve", "fullscreen", "pixel")], ["a", "fb"])
+    plan.add(0, "load", "a", n, 4, lambda i, s: (i * 4 + s) * 64, 64, dep=True)
+    plan.compute(0, n, np.full(n, 2000))
+    plan.add(0, "store", "fb", n, 1, lambda i, s: i * 4, 4, dep=True)
+    full, rec, terms = _both(plan, {"a": n * 4 * 64, "fb": n * 4}, n, ["core.sms=30"])
+    (bounds, extra), = terms
+    assert bounds["phases"] == n * 4 * 64 / 32 + 2000 + n * 4 / 32 and bounds["dram"] == 7800
+    assert rec["passes"][0]["bound"] == "phases"
+    assert abs(rec["total"] / full - 1) < 0.01, (rec["total"], full)           # the full model: 9,884 cycles

@@ -37,6 +37,11 @@ largest of
   passes, whose issue bound counts the helper lanes of 2x2 quads); a software
   rasterizer's vertex loads, setup and bounding-box scan on the SMs (triangle
   mapping, in the issue and dram bounds);
+* phases: in a pass of thread lanes whose warps are all resident at once (they
+  start together), the warps go through the groups in step, so each group's
+  units do not overlap the next's: the sum over groups of each group's
+  busiest unit (an SM's issue port, the DRAM, the L2, the atomic units, the
+  busiest ROP);
 * front_end: in a pixel shader's pass, a warp starts once the front end has its
   fragments out, so each unit (an SM's issue port, the DRAM, the L2, the atomic
   units, the busiest ROP) serves a warp's work only after that: when such a
@@ -133,6 +138,24 @@ def _distinct(a: np.ndarray) -> int:
     return int(np.count_nonzero(a[1:] != a[:-1])) + 1 if len(a) else 0
 
 
+def _as_slice(idx: np.ndarray):
+    """``idx`` as a slice when it is a run of consecutive integers (a view, no gather), else ``idx``."""
+    if len(idx) and int(idx[-1]) - int(idx[0]) + 1 == len(idx) and (len(idx) < 2 or (
+            idx.strides[0] != 0 and bool((idx[1:] > idx[:-1]).all()))):
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
+
+
+def _covering(parts: list) -> np.ndarray:
+    """The sorted distinct values of the thread arrays ``parts``: one of them when it is a run that holds every
+    other (a pass's groups over all its fragments, or some of them), else their union."""
+    for q in parts:
+        if isinstance(_as_slice(q), slice) and all(not len(o) or (int(o.min()) >= int(q[0]) and int(o.max()) <= int(
+                q[-1])) for o in parts if o is not q):
+            return q
+    return _union(parts)
+
+
 def _sorted_distinct(a: np.ndarray) -> np.ndarray:
     """The distinct values of ``a``, ascending (a sort: numpy's hashing ``unique`` is slower)."""
     a = np.sort(a)
@@ -184,22 +207,24 @@ class _Packing:
 
 
 SEG_MASK = (1 << 36) - 1  # a request key's segment (below its warp instruction)
-OP_SAMPLE = 1 << 17      # operations a memory group's coalescing and L2 sample holds at most (about)
+OP_SAMPLE = 1 << 17      # operations a memory group's coalescing and L2 sample holds at most (about; half without an L2)
 
 
-def _op_sample(lanes: np.ndarray, counts: np.ndarray, ws: int, every: bool) -> tuple:
+def _op_sample(lanes: np.ndarray, counts: np.ndarray, ws: int, every: bool, wide: bool) -> tuple:
     """A spread sample of a group's operations: (thread index, operation number, the position of its lane in
-    ``lanes``) of the first operation of the lanes of at most 4,096 warps, or (``every``) of all the operations of the
+    ``lanes``) of the first operation of the lanes of at most 2,048 warps, or (``every``) of all the operations of the
     lanes of as many warps as hold about :data:`OP_SAMPLE` of them (16 at least); the warps in
     :data:`SAMPLE_BLOCKS` runs of consecutive warps spread evenly over ``lanes`` (a run keeps the re-use of lines
-    between neighbouring warps)."""
+    between neighbouring warps). ``wide``: twice the warps and operations (an L2's reuse distances need them; the
+    coalescer's requests do not)."""
     n = len(lanes)
     c0, uniform = _uniform(counts)
+    most = 4096 if wide else 2048
     if not every or (uniform and c0 <= 1):
-        pos = _warp_positions(n, ws, 4096)
+        pos = _warp_positions(n, ws, most)
         return lanes[pos], np.broadcast_to(np.zeros(1, np.int64), pos.shape), pos
     mean = -(-int(counts.sum()) // max(1, n))
-    pos = _warp_positions(n, ws, int(np.clip(OP_SAMPLE // (ws * max(1, mean)), 16, 4096)))
+    pos = _warp_positions(n, ws, int(np.clip(most * OP_SAMPLE // (4096 * ws * max(1, mean)), 16, most)))
     c = np.asarray(_take(counts, pos), np.int64)
     rank = np.repeat(np.arange(len(pos)), c)
     first = np.cumsum(c) - c
@@ -207,6 +232,18 @@ def _op_sample(lanes: np.ndarray, counts: np.ndarray, ws: int, every: bool) -> t
 
 
 SAMPLE_BLOCKS = 16       # runs of consecutive warps a group's sample is taken in
+
+
+def _bbox(prim: np.ndarray, pixel: np.ndarray, width: int, triangles: int) -> np.ndarray:
+    """:func:`gpusim.hw.raster.bbox_pixels`, by runs when the fragments come in triangle order (no scatter)."""
+    if not len(prim) or (len(prim) > 1 and not bool((prim[1:] >= prim[:-1]).all())):
+        return bbox_pixels(prim, pixel, width, triangles)
+    runs = run_starts(prim)
+    x, y = pixel % width, pixel // width
+    out = np.ones(triangles, np.int64)
+    out[prim[runs]] = ((np.maximum.reduceat(x, runs) - np.minimum.reduceat(x, runs) + 1)
+                       * (np.maximum.reduceat(y, runs) - np.minimum.reduceat(y, runs) + 1))
+    return out
 
 
 def _loop_instructions(tri: np.ndarray, ws: int) -> tuple[np.ndarray, int]:
@@ -221,6 +258,34 @@ def _loop_instructions(tri: np.ndarray, ws: int) -> tuple[np.ndarray, int]:
         j = rank_in_runs(tri)
     iterations = int(j.max(initial=0)) + 1
     return (tri // ws) * iterations + j, iterations
+
+
+def _simt_loops(tri: np.ndarray, step: np.ndarray, inst: np.ndarray, iterations: int, ws: int,
+                n_warps: int) -> np.ndarray:
+    """Per warp of triangle threads, the sum over its loops' iterations of its longest lane's ``step`` there
+    (``tri``, ``step``, ``inst``: each fragment's triangle, cycles, warp instruction from
+    :func:`_loop_instructions`). When every triangle's fragments take the same cycles (no loop of varying length
+    inside), from the warp's lanes sorted by their fragments: between the k-th and the (k+1)-th most fragments the
+    k longest-looping lanes are active, the slowest of them deciding; else from every iteration's longest."""
+    if len(tri) and (len(tri) < 2 or bool((tri[1:] >= tri[:-1]).all())):
+        runs = run_starts(tri)
+        lo, hi = np.minimum.reduceat(step, runs), np.maximum.reduceat(step, runs)
+        if (lo == hi).all():
+            t = tri[runs]
+            n = np.diff(np.append(runs, len(tri))).astype(np.float64)
+            warp = t // ws
+            order = np.lexsort((-n, warp))               # each warp's lanes, the most fragments first
+            warp, n, s = warp[order], n[order], hi[order]
+            big = float(s.max(initial=0.0)) + 1.0
+            running = np.maximum.accumulate(s + warp * big) - warp * big     # the slowest so far, per warp
+            nxt = np.append(n[1:], 0.0)
+            nxt[np.append(warp[1:] != warp[:-1], True)] = 0.0                # a warp's last lane: down to 0
+            return np.bincount(warp, weights=(n - nxt) * running, minlength=n_warps)[:n_warps]
+    order = np.argsort(inst)
+    inst, steps = inst[order], step[order]
+    runs = run_starts(inst)
+    longest = np.maximum.reduceat(steps, runs) if len(runs) else steps
+    return np.bincount(inst[runs] // iterations, weights=longest, minlength=n_warps)[:n_warps]
 
 
 def _warp_waits(warp: np.ndarray, waits: np.ndarray, ws: int):
@@ -908,7 +973,14 @@ class _PassTimer:
         warp_issue = np.zeros(warps.n)        # each warp's cycles on its SM's issue port
         # triangle threads: each fragment's cycles in its iteration of the loop, and the warps' atomic waits
         loop = np.zeros(len(work.frag_prim)) if triangles else None
+        if triangles:                         # each fragment's warp instruction (iteration) in its thread's loop
+            frags = _as_slice(_covering([ids[i] for i in groups_of_pass[p]]))
+            frag_tri = work.frag_prim[frags]
+            inst_p, iterations = _loop_instructions(frag_tri, ws)
+            frag_inst = np.zeros(len(work.frag_prim), np.int64)
+            frag_inst[frags] = inst_p
         loop_waits: list = []
+        phases = 0.0                          # the groups one after another, each as long as its busiest unit
         fed = mapping == "fragment" and len(lane_keys) > 0     # the front end feeds the warps at its rate
         demand = {u: np.zeros(warps.n) for u in ("dram", "l2", "atomic", "rop")} if fed else None
         for gi, g, thread, sel, issuing, known, compute, cls, produces, nb, lanes_sel, counts, got, n in met:
@@ -930,6 +1002,9 @@ class _PassTimer:
             else:
                 wis[p] += busiest
                 warp_issue += per_warp * cost
+            before = (dram_bytes[p], l2_bytes[p], atomic_ops[p], rop_unit[p].max())     # (the phases bound)
+            phase_issue = float(np.bincount(np.arange(warps.n) % c.sms, weights=per_warp, minlength=c.sms).max()) \
+                * (alu_cost if compute else cost)
             at, steps = steps, steps + (1 if compute else (c0 if uniform else int(counts.max(initial=0))))
             ops = float(c0 * len(counts) if uniform else counts.sum())
             warp_ops = warps.sum_of(c0 if per_lane is None else per_lane, keys) if fed and not compute else None
@@ -940,16 +1015,16 @@ class _PassTimer:
             counts_live = counts if live is None else counts[live]
             mem_lat, atomic_lat, serial = lat[MEM], lat[ATOMIC], None
             # a triangle thread's loop: its warp's instruction at iteration j carries its triangles' j-th fragments
-            lane_inst, iterations = _loop_instructions(work.frag_prim[thread[lanes_live]], ws) \
-                if triangles and cls in (MEM, ATOMIC) and len(lanes_live) else (None, 1)
+            # the warp instruction of a lane: of a triangle thread's loop, its iteration's (frag_inst), else its warp's
+            lane_inst = frag_inst if triangles else None
             if not len(lanes_live) or compute:
                 pass                             # no thread issues this group in this pass, or no memory
             elif cls == MEM:
                 # coalescing and the L2's lines on a spread sample of the group's operations (every operation of
                 # the sampled lanes: a thread's later operations may straddle segments its first does not)
                 i_s, seq_s, pos_s = _op_sample(lanes_live, counts_live, ws,
-                                               g.seq_pass is None and g.pass_fn is None)
-                warp_s = warps.of(thread[i_s]) if lane_inst is None else lane_inst[pos_s]
+                                               g.seq_pass is None and g.pass_fn is None, self.l2.present)
+                warp_s = warps.of(thread[i_s]) if lane_inst is None else lane_inst[thread[i_s]]
                 addr = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
                 nb_s = np.broadcast_to(np.asarray(nb if nb is not None else g.bytes(i_s, seq_s), np.int64),
                                        addr.shape)
@@ -992,10 +1067,10 @@ class _PassTimer:
                 # lanes of one instruction on one word serialize: the instruction's result waits for its busiest
                 # word's operations, same_address_cycles apart
                 i_s, seq_s, pos_s = _op_sample(lanes_live, counts_live, ws,
-                                               g.seq_pass is None and g.pass_fn is None)
+                                               g.seq_pass is None and g.pass_fn is None, self.l2.present)
                 words = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
                 steps_ = int(seq_s.max(initial=0)) + 1
-                inst = (warps.of(thread[i_s]) if lane_inst is None else lane_inst[pos_s]) * steps_ + seq_s
+                inst = (warps.of(thread[i_s]) if lane_inst is None else lane_inst[thread[i_s]]) * steps_ + seq_s
                 key = np.sort((inst << 36) + (words & SEG_MASK))
                 starts = run_starts(key)
                 per_word = np.diff(np.append(starts, len(key)))
@@ -1040,12 +1115,17 @@ class _PassTimer:
                 add = add + (1 if same or threads_in is None else threads_in) * lp
                 if last_serial is not None:
                     add = add + last_serial(keys)
+            phases += max(phase_issue,
+                          (dram_bytes[p] - before[0]) / (gpu.dram.bytes_per_cycle * m.partitions),
+                          (l2_bytes[p] - before[1]) / (gpu.l2.bytes_per_cycle * m.partitions) if self.l2.present else 0,
+                          (atomic_ops[p] - before[2]) / (gpu.atomic.ops_per_cycle * m.partitions),
+                          rop_unit[p].max() - before[3])
             adds.append((got, add, (thread, issuing.count, issuing.s, sel) if known and issuing is not None
                          and g.seq_pass is not None else None))
             if loop is not None:                 # each fragment's share of its triangle thread's iteration
-                fr = thread if sel is None else thread[lanes_sel]
-                step = np.asarray(counts, np.float64) * ((alu_cost if compute else cost)
-                                                         + (unit_lat if g.dep and produces else 0.0))
+                fr = _as_slice(thread if sel is None else thread[lanes_sel])
+                step = (c0 if uniform else np.asarray(counts, np.float64)) * (
+                    (alu_cost if compute else cost) + (unit_lat if g.dep and produces else 0.0))
                 if g.dep and not produces and lp is not None and not waited:
                     step = step + lp
                 loop[fr] += step
@@ -1066,13 +1146,7 @@ class _PassTimer:
         if mapping == "triangle":
             # SIMT: a warp runs each iteration of its threads' loops as long as the longest of its lanes' j-th
             # fragments takes, so its chain is the sum over iterations of the longest, not its longest lane's sum
-            frags = _union([ids[i] for i in groups_of_pass[p]])
-            inst, iterations = _loop_instructions(work.frag_prim[frags], ws)
-            order = np.argsort(inst, kind="stable")
-            inst, steps_of = inst[order], loop[frags][order]
-            runs = run_starts(inst)
-            longest = np.maximum.reduceat(steps_of, runs) if len(runs) else steps_of
-            by_iteration = np.bincount(inst[runs] // iterations, weights=longest, minlength=warps.n)[:warps.n]
+            by_iteration = _simt_loops(frag_tri, loop[frags], inst_p, iterations, ws, warps.n)
             for w_ in loop_waits:
                 by_iteration = by_iteration + w_(np.arange(warps.n) * ws)
             wchain = np.maximum(wchain, by_iteration)
@@ -1080,8 +1154,7 @@ class _PassTimer:
             # no pixel included) loads its indices, then its vertices, sets up and scans its bounding box (a warp
             # its largest box) before its fragments' operations
             r = gpu.raster
-            frags = _union([ids[i] for i in groups_of_pass[p]])
-            box = bbox_pixels(work.frag_prim[frags], work.frag_pixel[frags], work.width, tris)
+            box = _bbox(frag_tri, work.frag_pixel[frags], work.width, tris)
             setup_w = _warp_max(box, ws) * (r.pixel_instructions * alu_cost) + r.setup_instructions * alu_cost
             vertex_dram, vertex_miss = l2.vertex_misses(tris)
             # the index load's round trip, then the vertex load's, each with its instruction's requests on the
@@ -1105,6 +1178,9 @@ class _PassTimer:
             "atomic_address": hottest[p] * gpu.atomic.same_address_cycles,
             "rop": float(rop_unit[p].max()),
         }
+        if mapping == "thread" and warps.n <= c.sms * c.warps_per_sm:
+            # every warp resident from the start: they go through the groups in step, each group's units in turn
+            bounds["phases"] = phases
         if held:
             bounds["scoreboard"], bounds["scoreboard_conflicts"] = _scoreboard_bound(
                 held, warps.of, wchain, gpu.scoreboard.entries)
