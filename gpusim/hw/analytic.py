@@ -1243,14 +1243,14 @@ def _analytic_timing(result, work, gpu, interpolate: bool) -> dict:
             used[p] = used[q]
             passes.append(schedule.records[q] | {"name": pk.name, "repeat_of": q})
         else:
-            _, a, b, w = how
-            mix.append((p, a, b, w))
-            used[p] = used[a] | used[b]
-            passes.append(interpolated(schedule.records[a], schedule.records[b], a, b, w) | {"name": pk.name})
+            _, at, w = how
+            mix.append((p, at, w))
+            used[p] = set().union(*(used[q] for q in at))
+            passes.append(interpolated([schedule.records[q] for q in at], at, w) | {"name": pk.name})
     for arr in arrays:
         arr[copy_to] = arr[copy_from]
-        for p, a, b, w in mix:
-            arr[p] = arr[a] + w * (arr[b] - arr[a])
+        for p, at, w in mix:
+            arr[p] = sum(wi * arr[q] for wi, q in zip(w, at))
     for x in passes:
         x.pop(TERMS, None)
     total = sum(x["cycles"] for x in passes)

@@ -16,14 +16,14 @@ In a family:
   grows with all of a pass's work (:data:`VOLUME_BOUNDS`) decided that pass -- at most REPEAT_TOLERANCE of its
   threads fewer in all, is that pass counted again (``repeat_of`` in its record);
 * a family of at least :data:`INTERPOLATE_MIN_PASSES` passes whose groups' threads only shrink from pass to pass
-  is timed instead at its first and last pass, then at the midpoint (by threads) of each span, a span split in two
-  until every bound that could decide in it lies, at the midpoint, within :data:`INTERPOLATE_TOLERANCE` of the
-  midpoint's cycles from the straight line through the ends' values of that bound against their threads. A bound
-  below the smallest deciding bound of the span's ends and midpoint decides nowhere between them (a family's
-  bounds only fall as its threads shrink). Inside an accepted span a pass with the same threads as one end is that
-  end counted again; every other gets each bound from its line, the largest deciding (``interpolated``: the two
-  ends, in its record). Depth peeling's bend from the ROP bound to the front end's fixed cost is two straight
-  spans.
+  is timed instead at its first and last pass, then at the midpoint (by threads) of each span. A span is accepted
+  when its midpoint's cycles lie within :data:`INTERPOLATE_TOLERANCE` of those the straight lines through its ends'
+  bounds against their threads give (each bound on its line, the largest deciding, so a bend from one bound to
+  another is followed); else when its quarter points' cycles lie within the tolerance of those the parabolas
+  through its ends' and midpoint's bounds give (a bound that curves as the threads shrink); else it is split at
+  its midpoint (the halves take the quarter points as theirs). Inside an accepted span a pass with the same
+  threads as one end is that end counted again; every other gets each bound from its line or parabola, the
+  largest deciding (``interpolated``: the timed passes, in its record).
 
 So a stiff scene's thousands of passes cost bookkeeping per pass and a timed pass per family and bend, each timed
 pass O(its threads), not O(passes x threads).
@@ -41,19 +41,31 @@ from gpusim.hw.placement import StillIssuing
 REPEAT_TOLERANCE = 0.01    # a pass whose groups each differ from a timed pass's by at most this share of their threads
 VOLUME_BOUNDS = ("issue", "raster", "dram", "atomic")   # bounds that grow with all of a pass's operations
 INTERPOLATE_MIN_PASSES = 64   # passes a family needs before its spans are interpolated
-INTERPOLATE_TOLERANCE = 1e-3  # largest |a bound at the midpoint off its line| / midpoint cycles, in an accepted span
+INTERPOLATE_TOLERANCE = 5e-3  # largest |cycles off the line or parabola| / cycles at a checked pass of a span
 TERMS = "terms"               # a timed record's bounds and the cycles added to the largest, for interpolation
 
 
-def interpolated(ra: dict, rb: dict, a: int, b: int, w: float) -> dict:
-    """The record of a pass ``w`` of the way from timed pass ``a``'s record ``ra`` to ``b``'s: each bound on the line
-    between theirs, the largest deciding, plus the round trip and driver cycles they share."""
-    (ta, extra), (tb, _) = ra[TERMS], rb[TERMS]
-    terms = {k: ta[k] + w * (tb[k] - ta[k]) for k in ta}
+def interpolated(records: list[dict], at: list[int], weights: list[float]) -> dict:
+    """The record of a pass between timed passes ``at`` (their ``records``): each bound the sum of theirs times
+    ``weights`` (the line through two, or the parabola through three, against their threads), the largest
+    deciding, plus the round trip and driver cycles they share."""
+    terms = {k: sum(w * r[TERMS][0][k] for w, r in zip(weights, records)) for k in records[0][TERMS][0]}
     limit = max(terms, key=terms.get)
-    return {"name": ra["name"], "kind": ra["kind"], "cycles": int(np.ceil(terms[limit])) + extra,
-            "warps": int(round(ra["warps"] + w * (rb["warps"] - ra["warps"]))), "bound": limit,
-            "interpolated": [a, b]}
+    return {"name": records[0]["name"], "kind": records[0]["kind"],
+            "cycles": int(np.ceil(terms[limit])) + records[0][TERMS][1],
+            "warps": int(round(sum(w * r["warps"] for w, r in zip(weights, records)))), "bound": limit,
+            "interpolated": list(at)}
+
+
+def lagrange(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``(len(x), len(nodes))`` weights of the polynomial through ``nodes`` (distinct) evaluated at ``x``."""
+    nodes, x = np.asarray(nodes, np.float64), np.asarray(x, np.float64)
+    out = np.ones((len(x), len(nodes)))
+    for i, xi in enumerate(nodes):
+        for j, xj in enumerate(nodes):
+            if i != j:
+                out[:, i] *= (x - xj) / (xi - xj)
+    return out
 
 
 @dataclass
@@ -206,7 +218,7 @@ def _single_digest(plan, placement, ids, bases, gi: int, p: int, seen: dict) -> 
 class Schedule:
     """Decides, family by family, which passes ``time(p)`` (a record with ``cycles`` and ``bound``) is called on and
     how every other pass is counted: :attr:`how` maps each pass to ``("timed",)``, ``("repeat", q)`` or
-    ``("interpolated", a, b, w)`` (a pass ``w`` of the way from ``a``'s cycles to ``b``'s)."""
+    ``("interpolated", at, weights)`` (each bound the timed passes ``at``'s times ``weights``)."""
 
     def __init__(self, families: list, time, interpolate: bool = True):
         self.time, self.how, self.records = time, {}, {}
@@ -263,10 +275,17 @@ class Schedule:
                 continue
             m = self._midpoint(f, a, b)
             self._timed(f, m)
-            if self._straight(f, a, m, b):
-                self._fill(f, a, b)
-            else:
-                todo += [(m, b), (a, m)]
+            if self._fits(f, (a, b), (m,)):
+                self._fill(f, a, b, (a, b))
+                continue
+            if m - a >= 2 and b - m >= 2:    # a curved span: the parabola through its ends and midpoint, checked
+                q1, q3 = self._midpoint(f, a, m), self._midpoint(f, m, b)   # at its quarters (which the halves
+                self._timed(f, q1)                                          # take as midpoints if it fails)
+                self._timed(f, q3)
+                if self._fits(f, (a, m, b), (q1, q3)):
+                    self._fill(f, a, b, (a, m, b))
+                    continue
+            todo += [(m, b), (a, m)]
 
     @staticmethod
     def _midpoint(f: Family, a: int, b: int) -> int:
@@ -277,38 +296,38 @@ class Schedule:
         i = int(np.searchsorted(-inner, -(t[a] + t[b]) / 2))
         return a + 1 + min(max(i, 0), len(inner) - 1)
 
-    def _weight(self, f: Family, a: int, b: int, j) -> np.ndarray:
-        t = f.threads.astype(np.float64)
-        return (t[a] - t[j]) / (t[a] - t[b]) if t[a] != t[b] else np.zeros(np.shape(j))
-
-    def _straight(self, f: Family, a: int, m: int, b: int) -> bool:
-        """Whether every bound of the midpoint lies on the line through the ends' (so the passes between, the
-        largest of those lines, follow a bend from one bound to another too)."""
-        ra, rm, rb = (self.records[int(f.passes[i])] for i in (a, m, b))
-        if TERMS not in ra or TERMS not in rm or TERMS not in rb:      # passes with nothing to time
-            return ra["cycles"] == rm["cycles"] == rb["cycles"]
-        (ta, ea), (tm, em), (tb, eb) = ra[TERMS], rm[TERMS], rb[TERMS]
-        if not (ea == em == eb and ta.keys() == tm.keys() == tb.keys()):
+    def _fits(self, f: Family, nodes: tuple, checks: tuple) -> bool:
+        """Whether the passes ``checks`` have the cycles, within the tolerance, that the line (two ``nodes``) or
+        parabola (three) through the nodes' bounds against their threads gives them (the largest deciding; which
+        of two bounds within a few cycles of each other is named matters not)."""
+        recs = [self.records[int(f.passes[i])] for i in (*nodes, *checks)]
+        if any(TERMS not in r for r in recs):      # passes with nothing to time
+            return len({r["cycles"] for r in recs}) == 1
+        if len({r[TERMS][1] for r in recs}) != 1 or any(r[TERMS][0].keys() != recs[0][TERMS][0].keys() for r in recs):
             return False
-        # a bound below the smallest deciding one at all three passes decides nowhere between (a family's bounds
-        # only fall as its threads shrink), so only the others need to be straight
-        floor = min(max(t.values()) for t in (ta, tm, tb))
-        near = [k for k in ta if max(ta[k], tm[k], tb[k]) >= floor]
-        if f.threads[a] == f.threads[b]:
-            return all(ta[k] == tm[k] == tb[k] for k in near)
-        w = float(self._weight(f, a, b, m))
-        return all(abs(ta[k] + w * (tb[k] - ta[k]) - tm[k]) <= INTERPOLATE_TOLERANCE * rm["cycles"] for k in near)
+        t = f.threads[list(nodes)]
+        if len(set(t.tolist())) < len(nodes):      # ends of one thread count: the same passes or none
+            return len(nodes) == 2 and len({r["cycles"] for r in recs}) == 1
+        at = [int(f.passes[i]) for i in nodes]
+        for row, rc in zip(lagrange(t, f.threads[list(checks)]), recs[len(nodes):]):
+            got = interpolated(recs[:len(nodes)], at, row.tolist())
+            if abs(got["cycles"] - rc["cycles"]) > INTERPOLATE_TOLERANCE * rc["cycles"]:
+                return False
+        return True
 
-    def _fill(self, f: Family, a: int, b: int) -> None:
-        """The passes inside an accepted span: an end again where their threads are that end's, else on the line
-        between the ends."""
+    def _fill(self, f: Family, a: int, b: int, nodes: tuple) -> None:
+        """The passes inside an accepted span: an end again where their threads are that end's, else on the line or
+        parabola through ``nodes``."""
         inner = np.arange(a + 1, b)
         same_a = (f.sizes[a + 1:b] == f.sizes[a]).all(axis=1)
         same_b = (f.sizes[a + 1:b] == f.sizes[b]).all(axis=1)
-        w = self._weight(f, a, b, inner)
+        t = f.threads[list(nodes)]
+        w = lagrange(t, f.threads[inner]) if len(set(t.tolist())) == len(nodes) else \
+            np.tile(np.eye(len(nodes))[0], (len(inner), 1))
+        at = [int(f.passes[i]) for i in nodes]
         pa, pb = int(f.passes[a]), int(f.passes[b])
         for j, sa, sb, wj in zip(inner.tolist(), same_a.tolist(), same_b.tolist(), w.tolist()):
             p = int(f.passes[j])
             if p in self.records:
                 continue
-            self.how[p] = ("repeat", pa) if sa else ("repeat", pb) if sb else ("interpolated", pa, pb, wj)
+            self.how[p] = ("repeat", pa) if sa else ("repeat", pb) if sb else ("interpolated", at, wj)
