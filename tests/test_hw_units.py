@@ -359,3 +359,21 @@ def test_a_run_too_large_to_lower_is_refused_with_advice_that_works():
 def test_gpu_configs_no_machine_could_be_fail_at_load(key, value, match):
     with pytest.raises(ConfigError, match=match):
         load_gpu("gtx280", [f"{key}={value}"])
+
+
+@pytest.mark.parametrize("schedulers, cycles", [(1, 4 * 1000), (2, 2 * 1000), (4, 1000)])
+def test_an_sms_schedulers_issue_side_by_side(schedulers, cycles):
+    """Four warps of 1,000 ALU instructions each on one SM of 128 lanes: with one scheduler over all of them a
+    warp instruction holds the SM's port a cycle and the warps take turns (4,000 cycles); with four (Ampere's
+    processing blocks, 32 lanes each) the warps' slots are on different schedulers and issue side by side
+    (1,000); with two, two warps share each (2,000)."""
+    plan = compute_plan(["a"])
+    plan.compute(0, 128, np.full(128, 1000), dep=False)
+    got, m = simulate(plan, {"a": 4}, 128, ["core.lanes_per_sm=128", f"core.schedulers={schedulers}"])
+    assert got == cycles
+    assert m.unit_summaries(got)["core"]["utilisation_mean"] == pytest.approx(1.0)
+
+
+def test_schedulers_must_divide_the_lanes():
+    with pytest.raises(ConfigError, match="schedulers"):
+        load_gpu("gtx280", ["core.lanes_per_sm=8", "core.schedulers=3"])

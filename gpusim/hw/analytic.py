@@ -466,7 +466,7 @@ def _fed(ready: np.ndarray, demand: np.ndarray, servers: int) -> tuple[float, bo
     the largest over warps ``j`` of ``ready[j]`` plus the demand of the warps from ``j`` on (a queue fed by the
     front end); and whether a backlog decides it (the largest is at a warp before the last: the unit fell behind
     the front end), not the last warp's own work after the front end. ``servers``: instances the warps are dealt
-    round (an SM's issue port each), else one."""
+    round (a scheduler's issue port each), else one."""
     n = len(ready)
     if not n:
         return 0.0, False
@@ -1004,7 +1004,7 @@ class _PassTimer:
                 warp_issue += per_warp * cost
             before = (dram_bytes[p], l2_bytes[p], atomic_ops[p], rop_unit[p].max())     # (the phases bound)
             phase_issue = float(np.bincount(np.arange(warps.n) % c.sms, weights=per_warp, minlength=c.sms).max()) \
-                * (alu_cost if compute else cost)
+                * (alu_cost if compute else cost) / c.schedulers
             at, steps = steps, steps + (1 if compute else (c0 if uniform else int(counts.max(initial=0))))
             ops = float(c0 * len(counts) if uniform else counts.sum())
             warp_ops = warps.sum_of(c0 if per_lane is None else per_lane, keys) if fed and not compute else None
@@ -1171,7 +1171,7 @@ class _PassTimer:
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
         n_sm = np.bincount(sm, minlength=c.sms)
         bounds = {
-            "issue": float(np.bincount(sm, weights=warp_issue, minlength=c.sms).max()),
+            "issue": float(np.bincount(sm, weights=warp_issue, minlength=c.sms).max()) / c.schedulers,
             "latency": float(max(wchain.max(), (per_sm / np.maximum(1, np.minimum(n_sm, c.warps_per_sm))).max())),
             "dram": dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions),
             "atomic": atomic_ops[p] / (gpu.atomic.ops_per_cycle * m.partitions),
@@ -1192,7 +1192,7 @@ class _PassTimer:
             # that, and the last warps' chains run after the front end is done
             ready = self.ready_memo.ready(pk, lane_keys, warps, work, gpu)
             demand["issue"] = warp_issue
-            fed_by = [_fed(ready, d, c.sms if u == "issue" else 1) for u, d in demand.items()]
+            fed_by = [_fed(ready, d, c.issue_ports if u == "issue" else 1) for u, d in demand.items()]
             # the front end's last warps' chains, and their own work, end after it (the raster bound's tail);
             # a unit's backlog of work the front end fed faster than it serves is the front_end bound
             bounds["raster"] = max(bounds["raster"], float((ready + wchain).max()),

@@ -6,8 +6,10 @@ SM placement is decided; every stat and the analytic level use it), and a
 finished warp's slot takes its SM's next warp. Each resident-warp slot is a
 simpy process that runs its warps one after the other.
 
-A warp issues its instructions in program order through its SM's issue port
-(warps take the port in the order they ask for it). A memory instruction and
+A warp issues its instructions in program order through its scheduler's issue
+port (an SM has ``core.schedulers``, each over its share of the lanes; a
+resident-warp slot belongs to one; warps take a port in the order they ask for
+it). A memory instruction and
 the ``core.instructions_per_op`` ALU instructions around it hold the port for
 ``issue_cycles`` plus the ALU instructions' cycles; a :class:`Compute`
 instruction (triangle setup, a scheme's ALU work) for its own cycles. ALU
@@ -40,6 +42,10 @@ class CoreConfig:
     warp_size: int = param(32, unit="threads", doc="threads per warp", min=1, max=1024)
     lanes_per_sm: int = param(8, unit="lanes", doc="scalar lanes per SM (a warp instruction issues over "
                               "warp_size / lanes_per_sm cycles)", min=1)
+    schedulers: int = param(1, unit="schedulers", doc="warp schedulers per SM, each issuing one warp instruction "
+                            "at a time to its own lanes_per_sm / schedulers lanes; a resident-warp slot belongs to "
+                            "scheduler slot % schedulers: 1 on GT200 and G71, 4 on Ampere and Hopper (their SMs' "
+                            "four processing blocks, NVIDIA's GA102 and H100 whitepapers)", min=1, max=16)
     warps_per_sm: int = param(32, unit="warps", doc="resident warps per SM (latency hiding)", min=1, max=1024)
     clock_mhz: float = param(1296.0, unit="MHz", doc="shader clock: the model's cycle", gt=0)
     instructions_per_op: int = param(4, unit="instructions", doc="ALU instructions a thread issues per memory "
@@ -65,11 +71,19 @@ class CoreConfig:
         if self.warp_size & (self.warp_size - 1) or not 1 <= self.warp_size <= 1024:
             raise ValueError(f"warp_size: must be a power of two from 1 to 1024 threads (e.g. 32), "
                              f"got {self.warp_size}")
+        if self.lanes_per_sm % self.schedulers:
+            raise ValueError(f"schedulers: must divide lanes_per_sm = {self.lanes_per_sm} (each scheduler has its "
+                             f"own share of the lanes), got {self.schedulers}")
 
     @property
     def issue_cycles(self) -> int:
-        """Cycles one warp instruction occupies the SM's issue port."""
-        return -(-self.warp_size // self.lanes_per_sm)
+        """Cycles one warp instruction occupies its scheduler's issue port (over that scheduler's lanes)."""
+        return -(-self.warp_size // (self.lanes_per_sm // self.schedulers))
+
+    @property
+    def issue_ports(self) -> int:
+        """Issue ports of the whole GPU (an SM's schedulers each have one)."""
+        return self.sms * self.schedulers
 
     def alu_cycles(self, instructions):
         """Issue-port cycles of a warp's ``instructions`` ALU instructions (an int or an integer array): each
@@ -95,7 +109,7 @@ class SimtCore(Unit):
         super().__init__(config.sms)
         self.config, self.machine, self.env = config, machine, machine.env
         prog = machine.program
-        self.sm_free = [0] * config.sms              # cycle each SM's issue port is free
+        self.sm_free = [0] * config.issue_ports      # cycle each scheduler's issue port is free (SM-major)
         self.last_progress = 0                       # cycle of the last issue
         self.done = 0                                # cycle the pass's last operation completes
         self.waiting: dict[int, tuple] = {}          # warp -> (pass, SM, instruction, unit, event) it waits on
@@ -111,7 +125,9 @@ class SimtCore(Unit):
                 lo, hi = int(p.wi_start[0]), int(p.wi_start[-1])
                 sm[lo:hi] = self.place(p.warps, config.sms)[prog.wi_warp[lo:hi] - p.first_warp]
         cyc = prog.wi_cycles
-        self.busy_fp = (np.bincount(sm, weights=cyc, minlength=config.sms) * (1 << 16)).astype(np.int64).tolist()
+        # an SM's busy cycles: its ports' over its schedulers (all of them issuing: the SM busy every cycle)
+        self.busy_fp = (np.bincount(sm, weights=cyc, minlength=config.sms) * ((1 << 16) / config.schedulers)
+                        ).astype(np.int64).tolist()
         self.requests = np.bincount(sm, minlength=config.sms).tolist()
 
     @staticmethod
@@ -135,12 +151,14 @@ class SimtCore(Unit):
         procs = []
         for sm in range(sms):
             queue = deque(by_sm[bounds[sm]:bounds[sm + 1]].tolist())     # the SM's warps in submission order
-            for _ in range(min(slots, len(queue))):
-                procs.append(self.env.process(self._slot(p, sm, queue, wi_start, ready, serve)))
+            for slot in range(min(slots, len(queue))):
+                port = sm * self.config.schedulers + slot % self.config.schedulers
+                procs.append(self.env.process(self._slot(p, sm, port, queue, wi_start, ready, serve)))
         return procs
 
-    def _slot(self, p, sm: int, queue: deque, wi_start: list, ready, serve: list):
-        """One resident-warp slot of SM ``sm``: takes the SM's next waiting warp until none is left.
+    def _slot(self, p, sm: int, port: int, queue: deque, wi_start: list, ready, serve: list):
+        """One resident-warp slot of SM ``sm``, issuing through scheduler port ``port``: takes the SM's next
+        waiting warp until none is left.
 
         Times are integers and a timeout of ``d`` resumes exactly ``d`` later, so ``now`` is kept here and
         read from the environment only after waiting on a unit's event."""
@@ -167,23 +185,23 @@ class SimtCore(Unit):
                         yield timeout(value - now)
                         env.key = key
                         now = value
-                    f = sm_free[sm]
-                    sm_free[sm] = (f if f > now else now) + cyc
-                    if sm_free[sm] > self.last_progress:     # issuing ALU work is progress (the watchdog)
-                        self.last_progress = sm_free[sm]
+                    f = sm_free[port]
+                    sm_free[port] = (f if f > now else now) + cyc
+                    if sm_free[port] > self.last_progress:     # issuing ALU work is progress (the watchdog)
+                        self.last_progress = sm_free[port]
                     continue
                 if dep and value > now:              # wait for the result it depends on
                     yield timeout(value - now)
                     env.key = key
                     now = value
-                f = sm_free[sm]
+                f = sm_free[port]
                 if f > now:                          # the issue port is taken until f
-                    sm_free[sm] = f + cyc
+                    sm_free[port] = f + cyc
                     yield timeout(f - now)
                     env.key = key
                     now = f
                 else:
-                    sm_free[sm] = now + cyc
+                    sm_free[port] = now + cyc
                 d = serve[u](wi, now)
                 while type(d) is not int:            # the unit cannot take it yet: wait, then issue again
                     self.waiting[first + w] = (p.name, sm, wi, self.machine.program.units[u], d)
@@ -219,6 +237,6 @@ class SimtCore(Unit):
 
 
 def flush_cycles(core: CoreConfig, warps: int) -> int:
-    """A flush: drain the pipeline, then a full-screen quad of ``warps`` ALU-only warps on the SMs."""
-    per_sm = -(-warps // core.sms)
-    return core.pipeline_latency + per_sm * core.op_issue_cycles
+    """A flush: drain the pipeline, then a full-screen quad of ``warps`` ALU-only warps on the SMs' schedulers."""
+    per_port = -(-warps // core.issue_ports)
+    return core.pipeline_latency + per_port * core.op_issue_cycles
