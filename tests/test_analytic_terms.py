@@ -274,3 +274,17 @@ def test_warps_resident_together_go_through_their_groups_in_step():
     assert bounds["phases"] == n * 4 * 64 / 32 + 2000 + n * 4 / 32 and bounds["dram"] == 7800
     assert rec["passes"][0]["bound"] == "phases"
     assert abs(rec["total"] / full - 1) < 0.01, (rec["total"], full)           # the full model: 9,884 cycles
+
+
+def test_triangle_loops_over_a_screen_wide_triangle_number_their_instructions_past_27_bits():
+    """A software rasterizer's thread over a triangle covering the screen loops over a hundred thousand of its
+    pixels, so its warps' instructions (warp x iterations + iteration, times a fragment's operations) pass 2**27:
+    the coalescer's and the atomic words' keys must not overflow (an internal error on the bunny scene, whose
+    opaque wall is two such triangles)."""
+    from gpusim.hw.analytic import _instruction_words, _requests
+    big = np.array([(1 << 30) + 5, (1 << 30) + 5, 3, (1 << 30) + 5, 3], np.int64)
+    word = np.array([8, 8, 8, 12, 8], np.int64)
+    inst, per_word = _instruction_words(big, word)
+    assert inst.tolist() == [3, (1 << 30) + 5, (1 << 30) + 5] and per_word.tolist() == [2, 2, 1]
+    keys, nbytes = _requests(big, word * 4, np.full(5, 4, np.int64), 64)
+    assert len(keys) == 2 and (keys >= 0).all()

@@ -166,7 +166,7 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
     """The coalescer's requests of accesses (warp instruction ``inst``, byte ``addr``, ``nbytes`` each): one per
     instruction and segment touched (an access over a segment boundary touches several), of the bytes its lanes
     touch there rounded up to sectors, at most the segment; (request keys ``inst << 36 | segment``, ascending, and
-    their bytes)."""
+    their bytes; ``inst`` there its rank among the instructions when the numbers need more than 27 bits)."""
     seg = addr // segment
     span = (addr + nbytes - 1) // segment - seg + 1
     if (span > 1).any():
@@ -174,6 +174,8 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
         inst, addr, nbytes = np.repeat(inst, span), np.repeat(addr, span), np.repeat(nbytes, span)
         seg = np.repeat(seg, span) + k
         nbytes = np.minimum(addr + nbytes, (seg + 1) * segment) - np.maximum(addr, seg * segment)
+    if len(inst) and int(inst.max()) >= (1 << 27):      # instruction numbers past 27 bits: their ranks (in order)
+        inst = np.unique(inst, return_inverse=True)[1].reshape(inst.shape).astype(np.int64)
     key = (inst << 36) + seg
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
         order = np.argsort(key)
@@ -286,6 +288,22 @@ def _simt_loops(tri: np.ndarray, step: np.ndarray, inst: np.ndarray, iterations:
     runs = run_starts(inst)
     longest = np.maximum.reduceat(steps, runs) if len(runs) else steps
     return np.bincount(inst[runs] // iterations, weights=longest, minlength=n_warps)[:n_warps]
+
+
+def _instruction_words(inst: np.ndarray, word: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct (instruction, word) pairs of operations, by instruction then word: each pair's instruction, and
+    the operations on it. Packed into one int64 key where instructions fit 27 bits above the word's 36 (a
+    triangle thread's loop over a screen-wide triangle numbers its instructions past that), else sorted as pairs."""
+    if not len(inst):
+        return inst, np.zeros(0, np.int64)
+    if int(inst.max()) < (1 << 27):
+        key = np.sort((inst << 36) + word)
+        starts = run_starts(key)
+        return key[starts] >> 36, np.diff(np.append(starts, len(key)))
+    order = np.lexsort((word, inst))
+    i, w = inst[order], word[order]
+    starts = np.flatnonzero(np.r_[True, (i[1:] != i[:-1]) | (w[1:] != w[:-1])])
+    return i[starts], np.diff(np.append(starts, len(i)))
 
 
 def _warp_waits(warp: np.ndarray, waits: np.ndarray, ws: int):
@@ -1071,15 +1089,13 @@ class _PassTimer:
                 words = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
                 steps_ = int(seq_s.max(initial=0)) + 1
                 inst = (warps.of(thread[i_s]) if lane_inst is None else lane_inst[thread[i_s]]) * steps_ + seq_s
-                key = np.sort((inst << 36) + (words & SEG_MASK))
-                starts = run_starts(key)
-                per_word = np.diff(np.append(starts, len(key)))
-                runs = run_starts(key[starts] >> 36)
+                winst, per_word = _instruction_words(inst, words & SEG_MASK)
+                runs = run_starts(winst)
                 waits = (np.maximum.reduceat(per_word, runs) - 1) * float(gpu.atomic.same_address_cycles)
                 if lane_inst is None:            # an instruction an operation: the mean instruction's wait
                     atomic_lat = lat[ATOMIC] + (float(waits.mean()) if len(waits) else 0.0)
                 else:                            # a triangle thread's warp: its own instructions' waits
-                    serial = _warp_waits((key[starts][runs] >> 36) // (steps_ * iterations), waits, ws)
+                    serial = _warp_waits(winst[runs] // (steps_ * iterations), waits, ws)
             elif cls == ROP:
                 if addr is None:                # a group over many passes: each thread's unit, found once
                     if gi not in units_of:
