@@ -177,11 +177,18 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
     if len(inst) and int(inst.max()) >= (1 << 27):      # instruction numbers past 27 bits: their ranks (in order)
         inst = np.unique(inst, return_inverse=True)[1].reshape(inst.shape).astype(np.int64)
     key = (inst << 36) + seg
+    same = len(nbytes) > 0 and not (nbytes != nbytes[0]).any()    # every access the same size: counts suffice
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
-        order = np.argsort(key)
-        key, nbytes = key[order], nbytes[order]
+        if same:
+            key = np.sort(key)
+        else:
+            order = np.argsort(key)
+            key, nbytes = key[order], nbytes[order]
     starts = run_starts(key)
-    touched = np.add.reduceat(nbytes, starts) if len(key) else nbytes
+    if same:
+        touched = np.diff(np.append(starts, len(key))) * nbytes[0]
+    else:
+        touched = np.add.reduceat(nbytes, starts) if len(key) else nbytes
     return key[starts], np.minimum(-(-touched // SECTOR) * SECTOR, max(segment, SECTOR))
 
 
