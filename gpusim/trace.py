@@ -163,7 +163,9 @@ class FragmentTrace:
 
     def subset(self, mask: np.ndarray) -> "FragmentTrace":
         """A new trace with the fragments where ``mask`` is true, order kept."""
-        return FragmentTrace(self.x[mask], self.y[mask], self.z[mask], self.rgba[mask],
+        mask = np.asarray(mask)
+        rows = np.compress(mask, self.rgba, axis=0) if mask.dtype == bool else np.take(self.rgba, mask, axis=0)
+        return FragmentTrace(self.x[mask], self.y[mask], self.z[mask], rows,   # rows: faster than rgba[mask]
                              self.prim[mask], self.opaque[mask], self.width, self.height,
                              dict(self.meta), self.source)
 

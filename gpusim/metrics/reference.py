@@ -36,6 +36,7 @@ def composite_exact(trace: FragmentTrace, background=None) -> np.ndarray:
     bg = trace.background if background is None else np.asarray(background, dtype=np.float64)
     pix = trace.pixel_ids()
     order = depth_order(trace, pix)
-    alpha = np.where(trace.opaque[order], 1.0, trace.rgba[order, 3].astype(np.float64))
-    image = composite_runs(pix[order], trace.rgba[order, :3], alpha, trace.pixel_count, bg)
+    rgba = np.take(trace.rgba, order, axis=0)       # take: rows several times faster than rgba[order]
+    alpha = np.where(trace.opaque[order], 1.0, rgba[:, 3].astype(np.float64))
+    image = composite_runs(pix[order], rgba[:, :3], alpha, trace.pixel_count, bg)
     return image.reshape(trace.height, trace.width, 3)

@@ -93,7 +93,7 @@ def histogram_trace(scene: HistogramScene) -> FragmentTrace:
     order = rng.permutation(n)
     meta = {"scene": scene.name, "generator": "gpusim trace (histogram)", "gpusim_version": __version__,
             "background": list(scene.screen.background), "scene_config": to_dict(scene)}
-    pix, z, rgba, opaque = pix[order], z[order], rgba[order], opaque[order]
+    pix, z, rgba, opaque = pix[order], z[order], np.take(rgba, order, axis=0), opaque[order]
     return FragmentTrace((pix % W).astype(np.uint16), (pix // W).astype(np.uint16), z, rgba,
                          np.arange(n, dtype=np.uint32), opaque, W, H, meta)
 

@@ -282,4 +282,4 @@ class FreePipeMDTS(Scheme):
     @staticmethod
     def _reverse_runs(pix, order, rgba):
         key = reversed_runs(pix[order])
-        return order[key], rgba[key]
+        return order[key], np.take(rgba, key, axis=0)
