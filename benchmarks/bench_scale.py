@@ -1,6 +1,6 @@
 """Scale: the stress scenes and a 20M-fragment frame through every scheme and fidelity level.
 
-    .venv/bin/python benchmarks/bench_scale.py                     # both parts (about 25 minutes on 2 cores)
+    .venv/bin/python benchmarks/bench_scale.py                     # both parts (about 30 minutes on 2 cores)
     .venv/bin/python benchmarks/bench_scale.py --part stress --scheme kbuffer --level analytic
     .venv/bin/python benchmarks/bench_scale.py --part big --no-full
 
@@ -8,6 +8,9 @@ Every run is timed in a child process of its own (one per scene and scheme), whi
 peak resident memory (``ru_maxrss``); each child first replays a tiny trace through the same
 scheme and levels, so imports and first calls are not timed. Times are CPU seconds of the child
 (user + system: what other work on a shared machine disturbs least) with wall seconds beside them.
+In the stress part a call shorter than 2 s of CPU is made up to ``--repeat`` times (default 3), the
+fastest counting, and each scheme's baseline and stress runs follow one another, so the machine's
+drift over the part's minutes does not enter a ratio.
 
 1. Stress scenes (issue 18): ``stress-layers``, ``coplanar``, ``alpha-extremes`` and ``slivers`` at
    their bundled sizes, and the ``default`` scene at its bundled 512x512 as the baseline, through
@@ -53,6 +56,7 @@ BIG_FULL_SECONDS = 120.0       # freepipe-abuffer at the full level
 BIG_FULL_SCHEME = "freepipe-abuffer"
 MIN_FRAGMENTS = 20_000_000
 W = 31                         # the scheme column
+REPEAT_BELOW = 2.0             # CPU seconds: a stress-part call shorter than this is repeated (--repeat)
 
 
 def _cpu() -> float:
@@ -76,11 +80,25 @@ def _timed(fn):
     return out, time.perf_counter() - wall, _cpu() - cpu
 
 
-def _level(result, trace, level: str, gpu, reference) -> dict:
+def _best(fn, repeat: int):
+    """:func:`_timed` of ``fn``, called again (up to ``repeat`` calls in all) while a call takes under
+    :data:`REPEAT_BELOW` CPU seconds: the fastest call's figures (a short run's time is mostly the
+    machine's noise, which a single call on a shared 2-core machine shows as 2x from minute to minute)."""
+    best = _timed(fn)
+    for _ in range(repeat - 1):
+        if best[2] >= REPEAT_BELOW:
+            break
+        again = _timed(fn)
+        if again[2] < best[2]:
+            best = again
+    return best
+
+
+def _level(result, trace, level: str, gpu, reference, repeat: int = 1) -> dict:
     """One timing level on a functional result: status, times, cycles, the analytic level's repeated passes."""
     from gpusim.errors import GpusimError
     from gpusim.replay import run_timing
-    got, wall, cpu = _timed(lambda: run_timing(result, trace, level, gpu, reference))
+    got, wall, cpu = _best(lambda: run_timing(result, trace, level, gpu, reference), repeat)
     if isinstance(got, GpusimError):
         return {"status": "refused", "error": str(got), "wall": wall, "cpu": cpu}
     rec = got[0]
@@ -112,11 +130,12 @@ def child_scene(job: dict) -> dict:
     trace = trace_scene(*load_scene(job["scene"]), progress=False)
     gpu = load_gpu(*GPU)
     out = {"fragments": len(trace), "size": f"{trace.width}x{trace.height}", "levels": {}}
-    (result, _, reference), wall, cpu = _timed(lambda: run_functional(trace, job["scheme"], {}))
+    repeat = job.get("repeat", 1)
+    (result, _, reference), wall, cpu = _best(lambda: run_functional(trace, job["scheme"], {}), repeat)
     out["levels"]["none"] = {"status": "ok", "wall": wall, "cpu": cpu, "passes": len(result.passes)}
     for level in job["levels"]:
         if level != "none":
-            out["levels"][level] = _level(result, trace, level, gpu, reference)
+            out["levels"][level] = _level(result, trace, level, gpu, reference, repeat)
     return out
 
 
@@ -175,15 +194,16 @@ def _us(entry: dict, fragments: int) -> float:
     return entry["cpu"] / fragments * 1e6
 
 
-def stress(schemes, levels, scenes, timeout: float) -> bool:
+def stress(schemes, levels, scenes, timeout: float, repeat: int) -> bool:
     """Part 1; whether every target was met."""
     print(f"== Stress scenes against {BASELINE} (bundled sizes, gtx280, runner.workers = 1): CPU microseconds "
-          f"per fragment, and x = that / {BASELINE}'s for the same scheme and level; R = refused in one line")
+          f"per fragment (best of up to {repeat} calls for a call under {REPEAT_BELOW:g} s), and x = that / "
+          f"{BASELINE}'s for the same scheme and level; R = refused in one line")
     got: dict[tuple[str, str], dict] = {}
-    for scene in (BASELINE, *scenes):
-        for scheme in schemes:
-            got[scene, scheme] = run_child({"kind": "scene", "scene": scene, "scheme": scheme, "levels": levels},
-                                           timeout)
+    for scheme in schemes:                # a scheme's baseline and stress runs close together in time
+        for scene in (BASELINE, *scenes):
+            got[scene, scheme] = run_child({"kind": "scene", "scene": scene, "scheme": scheme, "levels": levels,
+                                            "repeat": repeat}, timeout)
     ok = True
     worst: list[tuple[float, str]] = []
     problems: list[str] = []
@@ -320,6 +340,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                     help="the large frame's scheme processes run at a time (default: one per CPU, %(default)s)")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds each child process may take")
+    ap.add_argument("--repeat", type=int, default=3, help="stress part: calls of a level that takes under "
+                    f"{REPEAT_BELOW:g} s of CPU, the fastest counting (default: %(default)s)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
@@ -333,7 +355,7 @@ def main(argv=None) -> int:
     print(f"{os.cpu_count()} CPUs, load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     ok = True
     if args.part in ("stress", "all"):
-        ok &= stress(schemes, levels, args.scene or list(STRESS), args.timeout)
+        ok &= stress(schemes, levels, args.scene or list(STRESS), args.timeout, max(1, args.repeat))
     if args.part in ("big", "all"):
         ok &= big(schemes, args.big_scene, not args.no_full, args.timeout, max(1, args.jobs))
     return 0 if ok else 1
