@@ -174,3 +174,25 @@ def test_committed_fidelity_report_matches_the_experiment():
     resolved = tomllib.loads((report / "resolved.toml").read_text())
     assert [s["set"] for s in resolved["scene-sweeps"]] == \
         [s["set"] for s in load_experiment("fidelity-report").resolved_data()["scene-sweeps"]]
+
+
+def test_committed_speed_report_measures_the_speed_targets():
+    """reports/fidelity-speed/ is fidelity-speed.toml's run: every case of at least 1M fragments, so its targets
+    table measures the speed-ups; its only failed runs are refusals over runner.max_operations."""
+    from gpusim.experiment import load_experiment
+    from gpusim.experiment.grid import expand
+    from gpusim.report.tables import FAST_CASE_FRAGMENTS, fast_cases
+    report = ROOT / "reports" / "fidelity-speed"
+    t = pd.read_parquet(report / "results.parquet")
+    assert len(t) == len(expand(load_experiment("fidelity-speed"))), \
+        "reports/fidelity-speed is not the experiment's: run `gpusim run fidelity-speed` and commit it"
+    failed = t[t["status"] != "ok"]
+    assert failed["error"].str.contains("over runner.max_operations").all(), failed["error"].tolist()
+    assert (t.loc[t["status"] == "ok", "fragments"] >= FAST_CASE_FRAGMENTS).all()
+    errors = fidelity_errors(with_labels(t))
+    fast = fast_cases(errors)
+    text = (report / "index.md").read_text()
+    assert f"{FAST_CASE_FRAGMENTS:,} fragments only: 1 setting, {len(fast)} runs here." in text
+    targets = fidelity_targets(errors).set_index(["level", "target"])
+    speed = targets[targets.index.get_level_values("target").str.contains("speed-up")]
+    assert (speed["cases"] > 0).all()

@@ -11,13 +11,8 @@ from pathlib import Path
 
 from gpusim.errors import GpusimError
 from gpusim.replay import jsonable
+from gpusim.text import counted  # noqa: F401  (the commands' wording, re-exported)
 from gpusim.trace import MAX_SCREEN_SIDE
-
-
-def counted(n: int, word: str, plural: str | None = None) -> str:
-    """``n`` with thousands separators and ``word`` in the singular for one, else the plural
-    (``word`` + "s" unless given): ``counted(1, "pixel")`` is "1 pixel", ``counted(2, "pixel")`` "2 pixels"."""
-    return f"{n:,} {word if n == 1 else plural or word + 's'}"
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -25,6 +25,7 @@ from gpusim.report.tables import (CASE_ERROR_BOUND, FAST_CASE_FRAGMENTS, MISORDE
                                   fidelity_misses, fidelity_summary, fidelity_targets, fmt, markdown, most_faithful,
                                   one_per_functional, per_fragment, scene_sweeps, structure_table, unit_utilisation,
                                   with_labels)
+from gpusim.text import counted
 
 IMAGES_PER_FIGURE = 11
 IMAGE_SCENES = 3            # scenes whose images the report draws (the rest stay under runs/)
@@ -262,7 +263,7 @@ class _Report:
                  "level's against the full level on the same scene, GPU and scheme configuration; a speed-up is "
                  "the full level's wall time over the level's, and the speed targets count the cases of at least "
                  f"{FAST_CASE_FRAGMENTS:,} fragments only: "
-                 + (f"{fast['setting'].nunique()} settings, {len(fast)} runs here." if len(fast) else
+                 + (f"{counted(fast['setting'].nunique(), 'setting')}, {counted(len(fast), 'run')} here." if len(fast) else
                     "no case here has that many fragments, so the speed targets are not measured (the table "
                     "below gives the speed-ups of all cases, small ones, where each level's fixed costs weigh "
                     "most)."), "")
