@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gpusim.hw import load_gpu
-from gpusim.hw.analytic import _PassTimer, _fed, _usable_sets, analytic_timing
+from gpusim.hw.analytic import _PassTimer, _fed, analytic_timing
 from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine
 from gpusim.opplan import OpPlan, Pass, layout_bases
@@ -93,11 +93,22 @@ def test_without_an_l2_every_request_pays_the_dram():
     assert "l2" not in bounds and bounds["latency"] == 10 * (1 + 32 + 100) and extra == 100
 
 
-def test_the_l2_sets_a_partitions_lines_reach():
-    # a slice serves every partitions-th 256-byte block; a line's set is its number modulo the sets
-    assert _usable_sets(load_gpu("laptop-ampere")) == 64          # 4 partitions: 2 lines of every 8, of 256 sets
-    assert _usable_sets(load_gpu("modern")) == 100                # 16 partitions: 2 of every 32, of 1,600 sets
-    assert _usable_sets(load_gpu("gtx280", SIMPLE + L2)) == 8     # one partition: every set
+def test_the_l2_holds_its_whole_capacity():
+    # 16 slices of 4 sets x 2 ways (256-byte interleave, 128-byte lines: a partition's lines come two in every
+    # 32): a pass touching exactly the 128 lines the slices hold finds them all again in the next pass, in the
+    # full level (each slice numbers the lines of its own share, so they fill every set) and in the analytic one
+    plan = OpPlan([Pass("first", "fullscreen", "pixel"), Pass("again", "fullscreen", "pixel")], ["a"])
+    for p in (0, 1):
+        plan.add(p, "load", "a", 128, 1, lambda i, s: i * 128, 4)
+    gpu = load_gpu("modern", ["l2.size_bytes=1024", "l2.line_bytes=128", "l2.ways=2"])
+    result = _Result(plan, {"a": 128 * 128})
+    work = Workload(plan, result.bases(), 64, 64, np.zeros(128, np.int64), np.arange(128), triangles=0)
+    machine = Machine(gpu, lower(work, gpu), 64)
+    cycles = machine.run()
+    l2 = machine.units["l2"].summary(cycles)
+    assert (l2["requests"], l2["hits"], l2["misses"]) == (256, 128, 128)
+    first, again = (_PassTimer(result, work, gpu).time(p)["terms"][0]["dram"] for p in (0, 1))
+    assert first > 0 and again == 0
 
 
 def test_warps_behind_the_scoreboard_start_once_all_their_cells_are_free():
@@ -288,3 +299,35 @@ def test_triangle_loops_over_a_screen_wide_triangle_number_their_instructions_pa
     assert inst.tolist() == [3, (1 << 30) + 5, (1 << 30) + 5] and per_word.tolist() == [2, 2, 1]
     keys, nbytes = _requests(big, word * 4, np.full(5, 4, np.int64), 64)
     assert len(keys) == 2 and (keys >= 0).all()
+
+
+def _requests_by_loop(inst, addr, nbytes, segment):
+    """The coalescer's requests written the plain way: every byte range cut at each segment boundary, summed per
+    (instruction, segment), rounded up to 32-byte sectors, at most the segment."""
+    touched: dict[tuple[int, int], int] = {}
+    for i, a, n in zip(inst.tolist(), addr.tolist(), nbytes.tolist()):
+        for s in range(a // segment, (a + n - 1) // segment + 1):
+            part = min(a + n, (s + 1) * segment) - max(a, s * segment)
+            touched[i, s] = touched.get((i, s), 0) + part
+    keys = sorted(touched)
+    return (np.array([(i << 36) + s for i, s in keys], np.int64),
+            np.array([min(-(-touched[k] // 32) * 32, max(segment, 32)) for k in keys], np.int64))
+
+
+@pytest.mark.parametrize("widths", [(4,), (20,), (4, 8, 16), (20, 70)])
+@pytest.mark.parametrize("seed", range(4))
+def test_requests_match_the_plain_coalescing(widths, seed):
+    # accesses within a segment, over one boundary, over several; equal or mixed sizes; lanes in any order
+    rng = np.random.default_rng(seed)
+    n = 500
+    inst = rng.integers(0, 40, n).astype(np.int64)
+    nbytes = rng.choice(np.array(widths, np.int64), n)
+    addr = rng.integers(0, 4096, n).astype(np.int64) * (4 if seed % 2 else 1)
+    if seed == 0:
+        inst = np.sort(inst)
+    from gpusim.hw.analytic import _requests
+    for segment in (32, 128):
+        keys, got = _requests(inst, addr, nbytes, segment)
+        want_keys, want = _requests_by_loop(inst, addr, nbytes, segment)
+        np.testing.assert_array_equal(keys, want_keys)
+        np.testing.assert_array_equal(got, want)

@@ -169,7 +169,15 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
     their bytes; ``inst`` there its rank among the instructions when the numbers need more than 27 bits)."""
     seg = addr // segment
     span = (addr + nbytes - 1) // segment - seg + 1
-    if (span > 1).any():
+    cross = np.flatnonzero(span > 1)
+    if len(cross) and int(span[cross].max()) == 2:   # one boundary at most: a second piece where it is crossed
+        cut = (seg[cross] + 1) * segment
+        first = nbytes.copy()
+        first[cross] = cut - addr[cross]
+        inst = np.concatenate((inst, inst[cross]))
+        seg = np.concatenate((seg, seg[cross] + 1))
+        nbytes = np.concatenate((first, addr[cross] + nbytes[cross] - cut))
+    elif len(cross):
         k = np.arange(int(span.sum())) - np.repeat(np.cumsum(span) - span, span)
         inst, addr, nbytes = np.repeat(inst, span), np.repeat(addr, span), np.repeat(nbytes, span)
         seg = np.repeat(seg, span) + k
@@ -179,10 +187,10 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
     key = (inst << 36) + seg
     same = len(nbytes) > 0 and not (nbytes != nbytes[0]).any()    # every access the same size: counts suffice
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
-        if same:
-            key = np.sort(key)
+        if same:           # stable: numpy's radix/timsort, faster on the runs of ascending keys lanes give
+            key = np.sort(key, kind="stable")
         else:
-            order = np.argsort(key)
+            order = np.argsort(key, kind="stable")
             key, nbytes = key[order], nbytes[order]
     starts = run_starts(key)
     if same:
@@ -633,7 +641,7 @@ def _chain_on_range(adds: list):
 class _L2Model:
     """What an L2 (``l2.size_bytes`` per partition, write-allocate, LRU, its contents carried from pass to pass)
     catches of a pass's requests, from static counts only (a pass's time must not depend on which passes were
-    timed before it). Its capacity is that of the sets its partition's lines reach (:func:`_usable_sets`). A line
+    timed before it). Its capacity is every slice's lines (a slice's sets index its own share of the lines). A line
     a pass touches first misses if no earlier pass touched its structure, and otherwise is still there when the
     lines every pass so far touched fit (a share ``capacity / footprint`` of them otherwise); a line touched again
     in the pass hits when the lines touched in between fit (:meth:`_L2Pass.misses`). A miss after the L2 has
@@ -652,7 +660,7 @@ class _L2Model:
             return
         self.hit_lat, self.dram_lat = 2 * m.interconnect_latency + gpu.l2.latency, gpu.dram.latency
         line = self.line = gpu.l2.line_bytes
-        self.capacity = _usable_sets(gpu) * gpu.l2.ways * m.partitions       # lines
+        self.capacity = gpu.l2.size_bytes // gpu.l2.line_bytes * m.partitions       # lines, every slice's
         self.resident = gpu.core.sms * gpu.core.warps_per_sm           # warps running at once
         structures = getattr(result, "structures", None)
         if structures is not None:
@@ -731,19 +739,6 @@ class _L2Model:
     def again(self, p: int) -> float:
         """The share of the lines pass ``p`` touched that are still there when it touches them again."""
         return min(1.0, self.capacity / self.own[p]) if self.own[p] else 1.0
-
-
-def _usable_sets(gpu) -> int:
-    """Sets of an L2 slice that the lines of its partition fall in: a slice serves every ``memory.partitions``-th
-    block of ``memory.interleave_bytes``, and a line's set is its line number modulo the sets, so the partition's
-    lines may reach only some of them (16 partitions of 256-byte blocks and 128-byte lines: 2 lines of every 32,
-    a sixteenth of 1,600 sets)."""
-    m, l2 = gpu.memory, gpu.l2
-    sets = l2.size_bytes // (l2.line_bytes * l2.ways)
-    period = sets * m.partitions * max(1, -(-m.interleave_bytes // l2.line_bytes))     # lines, a whole cycle
-    line = np.arange(period, dtype=np.int64)
-    mine = line[interleave(line * l2.line_bytes, m.interleave_bytes, m.partitions) == 0]
-    return max(1, len(_sorted_distinct(mine % sets)))
 
 
 class _L2Pass:

@@ -74,6 +74,13 @@ def interleave(address, granularity: int, instances: int):
     return mod(div(address, granularity), instances)
 
 
+def within_instance(address, granularity: int, instances: int):
+    """Each byte address as an offset in its instance's own share of the address space (the interleaving bits of
+    :func:`interleave` taken out): an L2 slice indexes its sets by the lines of its partition's share, so that
+    the partition's lines reach every set."""
+    return div(address, granularity * instances) * granularity + mod(address, granularity)
+
+
 def occupancy(cost_fp: np.ndarray, pass_of: np.ndarray, instance: np.ndarray, program, name: str) -> np.ndarray:
     """How long requests of ``cost_fp`` sub-cycles in passes ``pass_of`` hold their ``instance`` of shared unit
     ``name`` (a key of ``Program.occupancy``): as long as they are served in a whole run; in a sampled program

@@ -1,5 +1,9 @@
 """L2 slices, one per memory partition: set-associative, LRU, write-back, write-allocate.
 
+A slice holds lines of its partition's share of the address space only (every ``memory.partitions``-th block
+of ``memory.interleave_bytes``); it numbers them within that share, so its sets index the share's lines one
+after another and every set is used.
+
 An instruction's requests are looked up one at a time, in the order the
 coalescer makes them. Each occupies its slice for ``bytes / l2.bytes_per_cycle``
 from when it arrives or the slice frees; a hit completes ``l2.latency`` later,
@@ -16,7 +20,7 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.hw.memory.level import MemoryLevel, Requests
-from gpusim.hw.unit import FP, BUSY, REQUESTS, UTILISATION, Stat, div, fp_costs, register_unit
+from gpusim.hw.unit import FP, BUSY, REQUESTS, UTILISATION, Stat, div, fp_costs, register_unit, within_instance
 from gpusim.metrics.composite import run_starts
 
 
@@ -51,6 +55,7 @@ class L2Slice(MemoryLevel):
     def __init__(self, config: L2Config, machine):
         super().__init__(machine)
         self.line, self.ways, self.latency = config.line_bytes, config.ways, config.latency
+        self.interleave = machine.gpu.memory.interleave_bytes, machine.gpu.memory.partitions   # bytes, slices
         self.rate = config.bytes_per_cycle
         self.sets = config.size_bytes // (config.line_bytes * config.ways)
         self.tags: dict[int, dict] = {}          # set (partition * sets + index) -> {tag: dirty}
@@ -79,7 +84,8 @@ class L2Slice(MemoryLevel):
         cost, miss, evict = (fp_costs(nbytes, self.rate), self.next.request_costs(nbytes),
                              self.next.request_costs(nbytes + self.line))
         held = [self.occupy(c, wi, part, c is cost) for c in (cost, miss, evict)]
-        reqs = list(zip(part.tolist(), div(address, self.line).tolist(), cost.tolist(), miss.tolist(),
+        line = div(within_instance(address, *self.interleave), self.line)     # numbered in the slice's share
+        reqs = list(zip(part.tolist(), line.tolist(), cost.tolist(), miss.tolist(),
                         evict.tolist(), *(h.tolist() for h in held)))
         first = wi[bounds[:-1]].tolist()
         w_ = write.tolist()
