@@ -160,3 +160,16 @@ def test_passes_that_make_the_same_work_again_as_new_groups_are_counted_again():
     assert len(resolves) == 100
     assert sum("repeat_of" in p for p in resolves) >= 97
     assert {p["cycles"] for p in resolves[1:-1]} == {resolves[1]["cycles"]}
+
+
+def test_a_family_of_passes_with_nothing_to_time_is_timed_or_counted_again():
+    # a long shrinking family whose records carry no bounds (passes with nothing to time, every one the same
+    # cycles): no pass is interpolated, for there are no bounds to interpolate, and every pass has its cycles
+    f = _family(np.arange(INTERPOLATE_MIN_PASSES + 8, 0, -1) * 64)
+
+    def empty(p):
+        return {"name": f"p{p}", "kind": "geometry", "cycles": 50, "warps": 0, "bound": "empty"}
+
+    s = Schedule([f], empty)
+    assert all(how[0] in ("timed", "repeat") for how in s.how.values())
+    assert {_cycles(s, p) for p in f.passes.tolist()} == {50}

@@ -41,7 +41,7 @@ class CoreConfig:
     sms: int = param(30, unit="SMs", doc="streaming multiprocessors", min=1, max=4096)
     warp_size: int = param(32, unit="threads", doc="threads per warp", min=1, max=1024)
     lanes_per_sm: int = param(8, unit="lanes", doc="scalar lanes per SM (a warp instruction issues over "
-                              "warp_size / lanes_per_sm cycles)", min=1)
+                              "warp_size / (lanes_per_sm / schedulers) cycles on its scheduler's lanes)", min=1)
     schedulers: int = param(1, unit="schedulers", doc="warp schedulers per SM, each issuing one warp instruction "
                             "at a time to its own lanes_per_sm / schedulers lanes; a resident-warp slot belongs to "
                             "scheduler slot % schedulers: 1 on GT200 and G71, 4 on Ampere and Hopper (their SMs' "

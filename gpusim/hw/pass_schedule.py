@@ -6,8 +6,8 @@ all of that but the number of threads each ``seq_pass`` group still has in them 
 peel passes, the R-buffer's recirculations, the multi-pass k-buffer's peels. A group that falls in one pass only
 stands for its content (operation, structure, threads, counts, first addresses), so passes that make the same
 work again as new groups (the multi-pass k-buffer's resolves of the same deep pixels) are one family too. Groups
-that pick a subset of their threads in each pass (a ``pass_fn``) are alike when the subsets' sizes, counts and
-addresses are.
+that pick a subset of their threads in each pass (a ``pass_fn``) are alike when the subsets' sizes, operation
+counts and first addresses' count, sum and sum of squares are (a summary, not the addresses themselves).
 
 In a family:
 
@@ -301,8 +301,8 @@ class Schedule:
         parabola (three) through the nodes' bounds against their threads gives them (the largest deciding; which
         of two bounds within a few cycles of each other is named matters not)."""
         recs = [self.records[int(f.passes[i])] for i in (*nodes, *checks)]
-        if any(TERMS not in r for r in recs):      # passes with nothing to time
-            return len({r["cycles"] for r in recs}) == 1
+        if any(TERMS not in r for r in recs):      # passes with nothing to time: no bounds to draw lines through,
+            return False                           # so the span splits until each is timed or counted again
         if len({r[TERMS][1] for r in recs}) != 1 or any(r[TERMS][0].keys() != recs[0][TERMS][0].keys() for r in recs):
             return False
         t = f.threads[list(nodes)]
