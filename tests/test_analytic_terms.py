@@ -331,3 +331,20 @@ def test_requests_match_the_plain_coalescing(widths, seed):
         want_keys, want = _requests_by_loop(inst, addr, nbytes, segment)
         np.testing.assert_array_equal(keys, want_keys)
         np.testing.assert_array_equal(got, want)
+
+
+def test_the_issue_bound_is_the_busiest_scheduler_port():
+    # 2 SMs of 4 schedulers: warps 0..5 go to SMs 0,1,0,1,0,1 and keep slots 0,0,1,1,2,2, so ports 0,4,1,5,2,6;
+    # SM 0's three warps of 10, 20, 30 cycles sit on three ports: the busiest is 30, not (10 + 20 + 30) / 4
+    from types import SimpleNamespace
+
+    from gpusim.hw.analytic import _busiest_port
+    c = SimpleNamespace(sms=2, schedulers=4, warps_per_sm=8)
+    per_warp = np.array([10.0, 1.0, 20.0, 1.0, 30.0, 1.0])
+    assert _busiest_port(per_warp, c) == 30.0
+    # more warps than an SM's slots: they take slots as they free, so its schedulers share its issue evenly
+    c = SimpleNamespace(sms=2, schedulers=4, warps_per_sm=2)
+    assert _busiest_port(per_warp, c) == (10 + 20 + 30) / 4
+    # one scheduler: the SM's issue is its port's
+    c = SimpleNamespace(sms=2, schedulers=1, warps_per_sm=8)
+    assert _busiest_port(per_warp, c) == 60.0

@@ -200,6 +200,19 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
     return key[starts], np.minimum(-(-touched // SECTOR) * SECTOR, max(segment, SECTOR))
 
 
+def _busiest_port(per_warp: np.ndarray, c) -> float:
+    """The issue cycles of the busiest scheduler port, ``per_warp[w]`` each warp's (on SM ``w % sms``,
+    :meth:`SimtCore.place`). Where every SM holds all its warps at once (at most ``warps_per_sm``), warp ``w``
+    keeps slot ``w // sms`` and so port ``slot % schedulers`` (gpusim.hw.core); more warps than slots take the
+    slots as they free, spreading over the ports, so an SM's issue is shared by its schedulers evenly."""
+    n = len(per_warp)
+    sm = SimtCore.place(n, c.sms)
+    if c.schedulers > 1 and n <= c.sms * c.warps_per_sm:
+        port = sm * c.schedulers + (np.arange(n) // c.sms) % c.schedulers
+        return float(np.bincount(port, weights=per_warp, minlength=c.sms * c.schedulers).max(initial=0.0))
+    return float(np.bincount(sm, weights=per_warp, minlength=c.sms).max(initial=0.0)) / c.schedulers
+
+
 def _hottest(addr: np.ndarray) -> int:
     """Most operations on one address."""
     ops = address_ids(addr)[1]
@@ -1023,8 +1036,7 @@ class _PassTimer:
                 wis[p] += busiest
                 warp_issue += per_warp * cost
             before = (dram_bytes[p], l2_bytes[p], atomic_ops[p], rop_unit[p].max())     # (the phases bound)
-            phase_issue = float(np.bincount(np.arange(warps.n) % c.sms, weights=per_warp, minlength=c.sms).max()) \
-                * (alu_cost if compute else cost) / c.schedulers
+            phase_issue = _busiest_port(per_warp, c) * (alu_cost if compute else cost)
             at, steps = steps, steps + (1 if compute else (c0 if uniform else int(counts.max(initial=0))))
             ops = float(c0 * len(counts) if uniform else counts.sum())
             warp_ops = warps.sum_of(c0 if per_lane is None else per_lane, keys) if fed and not compute else None
@@ -1189,7 +1201,7 @@ class _PassTimer:
         per_sm = np.bincount(sm, weights=wchain, minlength=c.sms)
         n_sm = np.bincount(sm, minlength=c.sms)
         bounds = {
-            "issue": float(np.bincount(sm, weights=warp_issue, minlength=c.sms).max()) / c.schedulers,
+            "issue": _busiest_port(warp_issue, c),
             "latency": float(max(wchain.max(), (per_sm / np.maximum(1, np.minimum(n_sm, c.warps_per_sm))).max())),
             "dram": dram_bytes[p] / (gpu.dram.bytes_per_cycle * m.partitions),
             "atomic": atomic_ops[p] / (gpu.atomic.ops_per_cycle * m.partitions),
