@@ -122,6 +122,18 @@ def test_software_rasterizer_runs_every_submitted_triangle():
     assert list(bbox_pixels(np.zeros(6, np.int64), np.asarray(pixels), WIDTH, 3)) == [6, 1, 1]
 
 
+def test_bounding_boxes_the_same_in_triangle_order_and_out_of_it():
+    # fragments grouped by triangle take the runs' reductions, shuffled ones the scatter: the same boxes, and a
+    # triangle without fragments (id 3) tests one pixel either way
+    rng = np.random.default_rng(1)
+    prim = np.sort(rng.choice(np.array([0, 1, 2, 4]), 200))
+    pixel = rng.integers(0, 64 * 64, 200)
+    grouped = bbox_pixels(prim, pixel, 64, 5)
+    shuffle = rng.permutation(200)
+    assert list(grouped) == list(bbox_pixels(prim[shuffle], pixel[shuffle], 64, 5))
+    assert grouped[3] == 1 and (grouped[[0, 1, 2, 4]] > 1).all()
+
+
 def test_setup_waits_for_the_vertices():
     # one warp, one triangle: the index load (1 segment + 100 latency), the vertex load after it (48 B: 2 segments
     # + 100), setup, then the fragment's store (1 + 100). Setup works on the vertices, so it cannot hide in the

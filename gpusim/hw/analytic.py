@@ -182,9 +182,7 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
         inst, addr, nbytes = np.repeat(inst, span), np.repeat(addr, span), np.repeat(nbytes, span)
         seg = np.repeat(seg, span) + k
         nbytes = np.minimum(addr + nbytes, (seg + 1) * segment) - np.maximum(addr, seg * segment)
-    if len(inst) and int(inst.max()) >= (1 << 27):      # instruction numbers past 27 bits: their ranks (in order)
-        inst = np.unique(inst, return_inverse=True)[1].reshape(inst.shape).astype(np.int64)
-    key = (inst << 36) + seg
+    key, _ = _instruction_keys(inst, seg)
     same = len(nbytes) > 0 and not (nbytes != nbytes[0]).any()    # every access the same size: counts suffice
     if len(key) > 1 and not (key[1:] >= key[:-1]).all():
         if same:           # stable: numpy's radix/timsort, faster on the runs of ascending keys lanes give
@@ -198,6 +196,16 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
     else:
         touched = np.add.reduceat(nbytes, starts) if len(key) else nbytes
     return key[starts], np.minimum(-(-touched // SECTOR) * SECTOR, max(segment, SECTOR))
+
+
+def _instruction_keys(inst: np.ndarray, low: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Keys ``inst << 36 | low`` that order operations by (warp instruction, ``low``: a segment or word, below 2**36),
+    and the instructions to map their high bits back to: None where the instructions fit 27 bits, else their
+    distinct values, the keys holding each one's rank among them (in order)."""
+    if len(inst) and int(inst.max()) >= (1 << 27):
+        distinct, rank = np.unique(inst, return_inverse=True)
+        return (rank.reshape(inst.shape).astype(np.int64) << 36) + low, distinct
+    return (inst << 36) + low, None
 
 
 def _busiest_port(per_warp: np.ndarray, c) -> float:
@@ -264,18 +272,6 @@ def _op_sample(lanes: np.ndarray, counts: np.ndarray, ws: int, every: bool, wide
 SAMPLE_BLOCKS = 16       # runs of consecutive warps a group's sample is taken in
 
 
-def _bbox(prim: np.ndarray, pixel: np.ndarray, width: int, triangles: int) -> np.ndarray:
-    """:func:`gpusim.hw.raster.bbox_pixels`, by runs when the fragments come in triangle order (no scatter)."""
-    if not len(prim) or (len(prim) > 1 and not bool((prim[1:] >= prim[:-1]).all())):
-        return bbox_pixels(prim, pixel, width, triangles)
-    runs = run_starts(prim)
-    x, y = pixel % width, pixel // width
-    out = np.ones(triangles, np.int64)
-    out[prim[runs]] = ((np.maximum.reduceat(x, runs) - np.minimum.reduceat(x, runs) + 1)
-                       * (np.maximum.reduceat(y, runs) - np.minimum.reduceat(y, runs) + 1))
-    return out
-
-
 def _loop_instructions(tri: np.ndarray, ws: int) -> tuple[np.ndarray, int]:
     """The warp instruction of each fragment of triangle threads (``tri``: each fragment's triangle), numbered
     warp ``tri // ws`` times the iterations plus the iteration (the fragment's rank among its triangle's, in
@@ -320,18 +316,15 @@ def _simt_loops(tri: np.ndarray, step: np.ndarray, inst: np.ndarray, iterations:
 
 def _instruction_words(inst: np.ndarray, word: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The distinct (instruction, word) pairs of operations, by instruction then word: each pair's instruction, and
-    the operations on it. Packed into one int64 key where instructions fit 27 bits above the word's 36 (a
-    triangle thread's loop over a screen-wide triangle numbers its instructions past that), else sorted as pairs."""
+    the operations on it, from one sort of :func:`_instruction_keys` (a triangle thread's loop over a screen-wide
+    triangle numbers its instructions past 27 bits: their ranks there)."""
     if not len(inst):
         return inst, np.zeros(0, np.int64)
-    if int(inst.max()) < (1 << 27):
-        key = np.sort((inst << 36) + word)
-        starts = run_starts(key)
-        return key[starts] >> 36, np.diff(np.append(starts, len(key)))
-    order = np.lexsort((word, inst))
-    i, w = inst[order], word[order]
-    starts = np.flatnonzero(np.r_[True, (i[1:] != i[:-1]) | (w[1:] != w[:-1])])
-    return i[starts], np.diff(np.append(starts, len(i)))
+    key, distinct = _instruction_keys(inst, word)
+    key = np.sort(key)
+    starts = run_starts(key)
+    high = key[starts] >> 36
+    return high if distinct is None else distinct[high], np.diff(np.append(starts, len(key)))
 
 
 def _warp_waits(warp: np.ndarray, waits: np.ndarray, ws: int):
@@ -1184,7 +1177,7 @@ class _PassTimer:
             # no pixel included) loads its indices, then its vertices, sets up and scans its bounding box (a warp
             # its largest box) before its fragments' operations
             r = gpu.raster
-            box = _bbox(frag_tri, work.frag_pixel[frags], work.width, tris)
+            box = bbox_pixels(frag_tri, work.frag_pixel[frags], work.width, tris)
             setup_w = _warp_max(box, ws) * (r.pixel_instructions * alu_cost) + r.setup_instructions * alu_cost
             vertex_dram, vertex_miss = l2.vertex_misses(tris)
             # the index load's round trip, then the vertex load's, each with its instruction's requests on the

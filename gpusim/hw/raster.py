@@ -48,6 +48,7 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.hw.unit import FP, Unit, occupancy_stats, register_unit
+from gpusim.metrics.composite import run_starts
 
 
 INDEX_BYTES = 16        # a software rasterizer's triangle indices: one int4 texel
@@ -120,11 +121,17 @@ def distinct_quads(prim: np.ndarray, pixel: np.ndarray, width: int, height: int)
 
 def bbox_pixels(prim: np.ndarray, pixel: np.ndarray, width: int, triangles: int) -> np.ndarray:
     """Per triangle ``0..triangles-1``, the pixels of its fragments' bounding box (at least 1: a triangle that
-    covers no pixel centre still tests the pixel its bounding box rounds to)."""
+    covers no pixel centre still tests the pixel its bounding box rounds to). Fragments in triangle order take
+    one reduction per run; others a scatter."""
     out = np.ones(triangles, np.int64)
     if not len(prim):
         return out
     x, y = pixel % width, pixel // width
+    if len(prim) < 2 or bool((prim[1:] >= prim[:-1]).all()):
+        runs = run_starts(prim)
+        out[prim[runs]] = ((np.maximum.reduceat(x, runs) - np.minimum.reduceat(x, runs) + 1)
+                           * (np.maximum.reduceat(y, runs) - np.minimum.reduceat(y, runs) + 1))
+        return out
     big = np.iinfo(np.int64).max
     x0 = np.full(triangles, big, np.int64)
     y0 = np.full(triangles, big, np.int64)
