@@ -31,7 +31,6 @@ from gpusim.scene import load_scene, trace_scene
 from gpusim.schemes import make_scheme, scheme_names
 from gpusim.schemes.common.arrays import pixel_key
 from gpusim.schemes.common.depthkey import depth_key
-from gpusim.schemes.common.reorder import permuted
 
 TARGET = 2_000_000  # fragments per second, random order
 SLOWDOWN = 1.5      # random-order time / coherent-order time, at most
@@ -75,7 +74,7 @@ def main(argv=None) -> int:
                                          f"camera.fov_y_deg={FOV_Y_DEG}"])
     coherent = trace_scene(scene, base, progress=False)
     n = len(coherent)
-    shuffled = permuted(coherent, np.random.default_rng(args.seed).permutation(n))
+    shuffled = coherent.subset(np.random.default_rng(args.seed).permutation(n))
     print(f"trace: default scene (fov_y {FOV_Y_DEG:g} deg) at {width}x{height}, {n:,} fragments, "
           f"max depth complexity {int(coherent.depth_complexity().max())}; random order: seed {args.seed}")
     keys = pixel_key(shuffled.pixel_ids(), depth_key(shuffled.z))

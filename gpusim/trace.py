@@ -162,7 +162,8 @@ class FragmentTrace:
         return bg if bg.shape == (3,) else np.zeros(3)
 
     def subset(self, mask: np.ndarray) -> "FragmentTrace":
-        """A new trace with the fragments where ``mask`` is true, order kept."""
+        """A new trace with the fragments where ``mask`` (booleans) is true, order kept, or those ``mask`` (indices)
+        names, in its order (a permutation reorders the trace)."""
         mask = np.asarray(mask)
         rows = np.compress(mask, self.rgba, axis=0) if mask.dtype == bool else np.take(self.rgba, mask, axis=0)
         return FragmentTrace(self.x[mask], self.y[mask], self.z[mask], rows,   # rows: faster than rgba[mask]

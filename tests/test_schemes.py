@@ -263,11 +263,11 @@ def test_kbuffer_batches_count_every_submitted_primitive():
     # 100 primitives submitted, 3 of them (ids 0, 50, 99) cover a pixel: batches of 32 are 4 draws (32, 32, 32, 4
     # primitives); in submission order a primitive's batch is its id // 32, in centroid order (99 nearest, then
     # 50, then 0) the 97 that cover nothing are spread evenly: ranks 0, 1, 2 at slots 0, 33, 66
-    from gpusim.schemes.common.reorder import batch_plan, centroid_order, permuted
+    from gpusim.schemes.common.reorder import batch_plan, centroid_order
     trace = make_trace([0, 1, 2], [0, 0, 0], [0.9, 0.5, 0.1], prim=[0, 50, 99], meta={"primitives": 100})
     frag_batch, prims = batch_plan(trace, 32, centroid=False)
     assert frag_batch.tolist() == [0, 1, 3] and prims.tolist() == [32, 32, 32, 4]
-    sorted_trace = permuted(trace, centroid_order(trace))
+    sorted_trace = trace.subset(centroid_order(trace))
     frag_batch, prims = batch_plan(sorted_trace, 32, centroid=True)
     assert sorted_trace.prim.tolist() == [99, 50, 0] and frag_batch.tolist() == [0, 1, 2]
     result = run("kbuffer", trace, k=2, batch=32, order="centroid")

@@ -83,7 +83,7 @@ from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC,
                                                    check_entry, entry_bytes, entry_image, payload_bytes, per_access,
                                                    resolve_alpha, resolve_alu)
 from gpusim.schemes.common.kbuffer_replay import make_replay
-from gpusim.schemes.common.reorder import batch_plan, centroid_order, permuted
+from gpusim.schemes.common.reorder import batch_plan, centroid_order
 from gpusim.schemes.common.storage import ColourFormat
 from gpusim.schemes.result import CapturedLists, SchemeResult, Stat, Structure
 
@@ -112,7 +112,7 @@ class KBuffer(Scheme):
     def simulate(self, trace) -> SchemeResult:
         n, P, k = len(trace), trace.pixel_count, self.k
         submission = centroid_order(trace) if self.order == "centroid" else np.arange(n)
-        t = permuted(trace, submission) if self.order == "centroid" else trace
+        t = trace.subset(submission) if self.order == "centroid" else trace
         g = PixelGroups(t)
         pix = g.pix
         fmt, cf = self.entry, self.colour_format
