@@ -80,17 +80,17 @@ def _timed(fn):
     return out, time.perf_counter() - wall, _cpu() - cpu
 
 
-def _best(fn, repeat: int, fresh=None):
-    """:func:`_timed` of ``fn(arg)``, called again (up to ``repeat`` calls in all) while a call takes under
+def _best(fn, repeat: int, first=None, fresh=None):
+    """:func:`_timed` of ``fn(first)``, called again (up to ``repeat`` calls in all) while a call takes under
     :data:`REPEAT_BELOW` CPU seconds: the fastest call's figures (a short run's time is mostly the
     machine's noise, which a single call on a shared 2-core machine shows as 2x from minute to minute).
-    ``fresh()``, untimed before each call, makes its argument anew, so that no call finds what an earlier one
-    cached on it (TFSS's addresses on its functional result)."""
-    best = _timed(lambda: fn(fresh() if fresh else None))
+    A repeat's argument is ``fresh()``, made untimed, so that no call finds what an earlier one cached on it
+    (TFSS's addresses on its functional result)."""
+    best = _timed(lambda: fn(first))
     for _ in range(repeat - 1):
         if best[2] >= REPEAT_BELOW:
             break
-        arg = fresh() if fresh else None
+        arg = fresh() if fresh else first
         again = _timed(lambda: fn(arg))
         if again[2] < best[2]:
             best = again
@@ -102,9 +102,7 @@ def _level(result, trace, level: str, gpu, reference, repeat: int = 1, again=Non
     ``again()`` makes a fresh functional result for each call after the first (see :func:`_best`)."""
     from gpusim.errors import GpusimError
     from gpusim.replay import run_timing
-    results = iter([result])
-    got, wall, cpu = _best(lambda r: run_timing(r, trace, level, gpu, reference), repeat,
-                           lambda: next(results, None) or again())
+    got, wall, cpu = _best(lambda r: run_timing(r, trace, level, gpu, reference), repeat, result, again)
     if isinstance(got, GpusimError):
         return {"status": "refused", "error": str(got), "wall": wall, "cpu": cpu}
     rec = got[0]
@@ -139,11 +137,12 @@ def child_scene(job: dict) -> dict:
     repeat = job.get("repeat", 1)
     (result, _, reference), wall, cpu = _best(lambda _: run_functional(trace, job["scheme"], {}), repeat)
     out["levels"]["none"] = {"status": "ok", "wall": wall, "cpu": cpu, "passes": len(result.passes)}
-    for level in job["levels"]:
-        if level != "none":
-            out["levels"][level] = _level(result, trace, level, gpu, reference, repeat,
-                                          lambda: run_functional(trace, job["scheme"], {}, reference=reference)[0])
-            result = run_functional(trace, job["scheme"], {}, reference=reference)[0]   # fresh: no level finds what another cached
+    def fresh():
+        return run_functional(trace, job["scheme"], {}, reference=reference)[0]
+
+    for i, level in enumerate(lv for lv in job["levels"] if lv != "none"):
+        # each level on a result of its own: none finds what another cached on it
+        out["levels"][level] = _level(result if i == 0 else fresh(), trace, level, gpu, reference, repeat, fresh)
     return out
 
 
