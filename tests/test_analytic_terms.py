@@ -348,3 +348,26 @@ def test_the_issue_bound_is_the_busiest_scheduler_port():
     # one scheduler: the SM's issue is its port's
     c = SimpleNamespace(sms=2, schedulers=1, warps_per_sm=8)
     assert _busiest_port(per_warp, c) == 60.0
+
+
+def _blends():
+    # 100 warps x 32 lanes blend 4-byte pixels one after another (tests/test_hw_units.py's stream)
+    plan = OpPlan([Pass("blend", "fullscreen", "pixel")], ["fb"])
+    plan.add(0, "blend", "fb", 3200, 1, lambda i, s: i * 4, 4)
+    return plan
+
+
+def test_rop_framebuffer_traffic_is_a_dram_bound():
+    # no L2: each instruction's 4 sectors read and written, 25,600 B at 32 B/cycle = 800 cycles, as at full
+    full, rec, terms = _both(_blends(), {"fb": 3200 * 4}, 3200, ["rop.ops_per_cycle=100.0"])
+    assert full == 800
+    assert rec["units"]["dram"]["busy_cycles"] == pytest.approx(800)
+    assert rec["passes"][0]["bound"] == "dram" and rec["total"] == pytest.approx(full, rel=0.15)
+
+
+def test_rop_framebuffer_traffic_goes_through_the_l2():
+    # with the 32-line L2: 800 requests of 32 B through the slice at 16 B/cycle = 1,600 cycles; a line's first
+    # read misses (100 lines), the other 7 requests on it hit; 68 of the misses evict a dirty line
+    full, rec, terms = _both(_blends(), {"fb": 3200 * 4}, 3200, ["rop.ops_per_cycle=100.0", *L2])
+    assert full == pytest.approx(1600, abs=40)
+    assert rec["passes"][0]["bound"] == "l2" and rec["total"] == pytest.approx(full, rel=0.1)

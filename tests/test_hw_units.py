@@ -76,15 +76,34 @@ def test_full_reorder_buffer_stalls_the_core():
     # warp 0: load done at 1 + 100 = 101, its 32 blends commit at 102..133; warp 1's 32 blends commit 134..165.
     plan = _reorder_plan()
     sizes = {"a": 128, "fb": 4}
-    roomy, m1 = simulate(plan, sizes, 64, ["core.sms=2", "rop.reorder_entries=64"])
+    # (framebuffer traffic off: the reorder buffer alone; test_rop_framebuffer_traffic_takes_dram_bandwidth)
+    roomy, m1 = simulate(plan, sizes, 64, ["core.sms=2", "rop.reorder_entries=64", "rop.memory_traffic=false"])
     # with room for all 32, warp 1 issues its load at cycle 1: done by 102; the ROPs drain at 165
     assert roomy == 165
     assert m1.units["rop"].summary(roomy)["stalls"] == 0
-    tight, m2 = simulate(plan, sizes, 64, ["core.sms=2", "rop.reorder_entries=8"])
+    tight, m2 = simulate(plan, sizes, 64, ["core.sms=2", "rop.reorder_entries=8", "rop.memory_traffic=false"])
     # 8 entries: warp 1 stalls until warp 0's blends commit (placed at cycle 101), its load then ends at 202
     assert tight == 101 + 1 + 100
     s = m2.units["rop"].summary(tight)
     assert s["stalls"] >= 1 and s["max_reorder_occupancy"] == 8
+
+
+def test_rop_framebuffer_traffic_takes_dram_bandwidth():
+    # 100 warps x 32 lanes blend 4-byte pixels one after another: a warp instruction touches 4 sectors of 32 B,
+    # each read and written: 256 B at 32 B/cycle = 8 cycles of the one DRAM channel. The ROP (100 ops/cycle)
+    # would take 32 cycles in all; the DRAM serves the 100 instructions back to back from cycle 0: 800 cycles.
+    plan = compute_plan(["fb"])
+    plan.add(0, "blend", "fb", 3200, 1, lambda i, s: i * 4, 4)
+    fast = ["rop.ops_per_cycle=100.0"]
+    cycles, m = simulate(plan, {"fb": 3200 * 4}, 3200, fast)
+    assert cycles == 800
+    assert m.built_units() == ["core", "coalescer", "dram", "rop"]
+    dram = m.unit_summaries(cycles)["dram"]
+    assert dram["requests"] == 100 * 4 * 2 and dram["busy_cycles"] == 800
+    assert m.unit_summaries(cycles)["coalescer"]["requests"] == 0      # the SM's own requests: none
+    # without the traffic the ROP and the issue of the warps decide, and no memory unit is built
+    ideal, m2 = simulate(plan, {"fb": 3200 * 4}, 3200, fast + ["rop.memory_traffic=false"])
+    assert ideal < 200 and m2.built_units() == ["core", "rop"]
 
 
 def test_stiff_hot_word_and_latency_range_are_exact():

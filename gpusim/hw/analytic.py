@@ -67,6 +67,7 @@ from gpusim.hw.lower import (PRODUCES, _quads_so_far, _raster_positions, scorebo
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.memory.coalescer import WRITE_OPS
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_triangle_cycles
+from gpusim.hw.rop import framebuffer_traffic
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import address_ids, entry_unit, interleave
 from gpusim.metrics.composite import run_starts
@@ -678,15 +679,19 @@ class _L2Model:
         first: dict = {}
         n_pass = len(plan.passes)
         in_pass = [set() for _ in range(n_pass)]
+        # the structures the memory path serves: the core's loads and stores, the ROPs' framebuffer traffic
+        framebuffer = framebuffer_traffic(gpu)
+        through = [not g.is_compute and (entry_unit(g.op) == MEM or framebuffer and entry_unit(g.op) == ROP)
+                   for g in plan.groups]
         for p, gis in enumerate(groups_of_pass):
             for gi in gis:
                 g = plan.groups[gi]
-                if g.is_compute or entry_unit(g.op) != MEM:
+                if not through[gi]:
                     continue
                 in_pass[p].add(g.structure)
                 first.setdefault(g.structure, p)
-        for g in plan.groups:
-            if not g.is_compute and entry_unit(g.op) == MEM:
+        for g, t in zip(plan.groups, through):
+            if t:
                 ops[g.structure] = ops.get(g.structure, 0) + int(g.total)
         # a structure's lines: those it allocates, at most one per operation on it
         self.lines = {s: max(1, min(alloc.get(s, ops[s]), ops[s])) for s in ops}
@@ -709,7 +714,7 @@ class _L2Model:
         for p, gis in enumerate(groups_of_pass):
             for gi in gis:
                 g = plan.groups[gi]
-                if not g.is_compute and g.op in WRITE_OPS:
+                if through[gi] and (g.op in WRITE_OPS or entry_unit(g.op) == ROP):
                     firsts_w.setdefault(g.structure, p)
         for s, p in firsts_w.items():
             written[p] += self.lines[s]
@@ -870,6 +875,7 @@ class _PassTimer:
         self.sel_lanes: dict = {}              # the last pass's lane info of threads still issuing, by their set
         self.ascending: dict = {}              # group -> whether its thread ids ascend
         self.units_of: dict = {}               # ROP group -> the unit of each of its threads' first address
+        self.framebuffer = framebuffer_traffic(gpu)   # ROP operations read and write through the memory path
         self.l2 = _L2Model(plan, result, self.placement, self.groups_of_pass, gpu, work)
 
     def _contiguous_round_trip(self, nbytes: int, miss: float) -> float:
@@ -884,6 +890,40 @@ class _PassTimer:
     def per_pass(self) -> tuple:
         return self.wis, self.alu, self.dram_bytes, self.atomic_ops, self.hottest, self.rop_unit, self.l2_bytes
 
+    def _traffic(self, g, thread, sel, lanes, counts, nb, lane_inst, warps: "_PassWarps", ops: float, warp_ops,
+                 at: int, l2: "_L2Pass", demand: dict | None, p: int, copies: int) -> tuple:
+        """A group's memory requests as the coalescer makes them, added to pass ``p``'s L2 and DRAM bytes (and
+        to the front end's demand): coalescing and the L2's lines on a spread sample of its operations (every
+        operation of the sampled lanes: a thread's later operations may straddle segments its first does not).
+        ``copies``: 1 for the core's loads and stores, 2 for the ROPs' framebuffer reads and their writes (the
+        write finds the line the read brought in; without an L2 both reach the DRAM). The requests' keys, their
+        mean bytes and the share that misses the L2."""
+        gpu, m = self.gpu, self.gpu.memory
+        segment = gpu.coalescer.segment_bytes
+        i_s, seq_s, _ = _op_sample(lanes, counts, gpu.core.warp_size, g.seq_pass is None and g.pass_fn is None,
+                                   self.l2.present)
+        warp_s = warps.of(thread[i_s]) if lane_inst is None else lane_inst[thread[i_s]]
+        addr = self.bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
+        nb_s = np.broadcast_to(np.asarray(nb if nb is not None else g.bytes(i_s, seq_s), np.int64), addr.shape)
+        inst = warp_s * (int(seq_s.max(initial=0)) + 1) + seq_s    # the warp instruction of each
+        wkey, req_b = _requests(inst, addr, np.maximum(nb_s, 1), segment)
+        requests_per_lane = len(wkey) / max(1, len(addr))
+        req_bytes = float(req_b.mean()) if len(req_b) else float(SECTOR)
+        requests = ops * requests_per_lane
+        per_request, miss = l2.misses(g.structure, (thread, sel), ops, requests, req_bytes, addr, warp_s, seq_s,
+                                      warps.n, at)
+        # the copies after the first hit the L2 (the line is in) or, without one, go to the DRAM as the first did
+        dram_per_request = per_request + (copies - 1) * (0.0 if self.l2.present else req_bytes)
+        self.l2_bytes[p] += copies * requests * req_bytes
+        self.dram_bytes[p] += requests * dram_per_request
+        if warp_ops is not None and self.l2.present:
+            demand["l2"] += warp_ops * (copies * requests_per_lane * req_bytes
+                                        / (gpu.l2.bytes_per_cycle * m.partitions))
+        if warp_ops is not None:
+            demand["dram"] += warp_ops * (requests_per_lane * dram_per_request
+                                          / (gpu.dram.bytes_per_cycle * m.partitions))
+        return wkey, req_bytes, miss
+
     def time(self, p: int) -> dict:
         """Pass ``p``'s record (name, kind, cycles, warps, the bound that decided it), its figures in the arrays."""
         plan, bases, work, gpu = self.plan, self.bases, self.work, self.gpu
@@ -896,6 +936,7 @@ class _PassTimer:
         wis, alu, dram_bytes, atomic_ops, hottest, rop_unit, l2_bytes = self.per_pass()
         l2 = self.l2.pass_state(p)           # the L2's lines touched so far in this pass, its requests and misses
         used, ascending, units_of = self.used, self.ascending, self.units_of
+        traffic = self._traffic
         last_still, sel_lanes = self.last_still, self.sel_lanes
         pk = plan.passes[p]
         if pk.kind == "flush":
@@ -1045,17 +1086,8 @@ class _PassTimer:
             if not len(lanes_live) or compute:
                 pass                             # no thread issues this group in this pass, or no memory
             elif cls == MEM:
-                # coalescing and the L2's lines on a spread sample of the group's operations (every operation of
-                # the sampled lanes: a thread's later operations may straddle segments its first does not)
-                i_s, seq_s, pos_s = _op_sample(lanes_live, counts_live, ws,
-                                               g.seq_pass is None and g.pass_fn is None, self.l2.present)
-                warp_s = warps.of(thread[i_s]) if lane_inst is None else lane_inst[thread[i_s]]
-                addr = bases[g.structure] + np.asarray(g.offset(i_s, seq_s), np.int64)
-                nb_s = np.broadcast_to(np.asarray(nb if nb is not None else g.bytes(i_s, seq_s), np.int64),
-                                       addr.shape)
-                inst = warp_s * (int(seq_s.max(initial=0)) + 1) + seq_s    # the warp instruction of each
-                wkey, req_b = _requests(inst, addr, np.maximum(nb_s, 1), segment)
-                requests_per_lane = len(wkey) / max(1, len(addr))
+                wkey, req_bytes, miss = traffic(g, thread, sel, lanes_live, counts_live, nb, lane_inst, warps, ops,
+                                                warp_ops, at, l2, demand, p, 1)
                 # a warp instruction's requests to one partition are served back to back before its result is
                 # back: the busiest partition's requests of each instruction, on average
                 cell = (wkey >> 36) * m.partitions + interleave((wkey & SEG_MASK) * segment, m.interleave_bytes,
@@ -1065,17 +1097,6 @@ class _PassTimer:
                 per_cell = np.diff(np.append(starts, len(cell)))
                 runs = run_starts(cell[starts] // m.partitions)
                 own = float(np.maximum.reduceat(per_cell, runs).mean()) if len(runs) else 0.0
-                req_bytes = float(req_b.mean()) if len(req_b) else float(SECTOR)
-                requests = ops * requests_per_lane
-                per_request, miss = l2.misses(g.structure, (thread, sel), ops, requests, req_bytes, addr, warp_s,
-                                              seq_s, warps.n, at)
-                l2_bytes[p] += requests * req_bytes
-                dram_bytes[p] += requests * per_request
-                if warp_ops is not None and self.l2.present:
-                    demand["l2"] += warp_ops * (requests_per_lane * req_bytes / (gpu.l2.bytes_per_cycle * m.partitions))
-                if warp_ops is not None:
-                    demand["dram"] += warp_ops * (requests_per_lane * per_request
-                                                  / (gpu.dram.bytes_per_cycle * m.partitions))
                 mem_lat = self.l2.latency(miss) + own * self.l2.service(req_bytes, miss)
             elif cls == ROP and g.seq_pass is not None and len(placement[gi][2]) > 1:
                 addr = None
@@ -1117,6 +1138,9 @@ class _PassTimer:
                        if g.op == "program_blend" else 1.0 / gpu.rop.ops_per_cycle)
                 load = np.bincount(unit, weights=counts_live * svc, minlength=gpu.rop.units)
                 rop_unit[p] += load
+                if self.framebuffer:        # a read and a write of each sector its instructions touch
+                    traffic(g, thread, sel, lanes_live, counts_live, nb, lane_inst, warps, ops, warp_ops, at, l2,
+                            demand, p, 2)
                 if warp_ops is not None and load.sum():
                     demand["rop"] += warp_ops * (svc * load.max() / load.sum())     # at the busiest unit's share
             elif cls == SCOREBOARD:
@@ -1279,8 +1303,9 @@ def _analytic_timing(result, work, gpu, interpolate: bool) -> dict:
     total = sum(x["cycles"] for x in passes)
     wis, _, dram_bytes, atomic_ops, _, rop_unit, _ = arrays
     every = set().union(*used)
-    units_built = [name for name, cls in (("dram", MEM), ("atomic", ATOMIC), ("rop", ROP), ("scoreboard", SCOREBOARD))
-                   if cls in every]
+    memory = MEM in every or (ROP in every and framebuffer_traffic(gpu))     # the ROPs' framebuffer traffic too
+    units_built = [name for name, on in (("dram", memory), ("atomic", ATOMIC in every), ("rop", ROP in every),
+                                         ("scoreboard", SCOREBOARD in every)) if on]
     busy = {"dram": dram_bytes.sum() / gpu.dram.bytes_per_cycle, "atomic": atomic_ops.sum() / gpu.atomic.ops_per_cycle,
             "rop": rop_unit.sum()}
     inst = {"dram": m.partitions, "atomic": m.partitions, "rop": gpu.rop.units}

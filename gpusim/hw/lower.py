@@ -33,6 +33,7 @@ import numpy as np
 from gpusim.errors import GpusimError
 from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, quad_ids
+from gpusim.hw.rop import framebuffer_traffic
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, interleave, mod
 from gpusim.metrics.composite import run_starts
@@ -471,28 +472,29 @@ def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pas
     the kept threads' (1 where they put none); None when every factor is 1. The run's loads are counted once
     per ``pieces`` (``Pieces.loads``)."""
     mem = gpu.memory
-    instances = {"coalescer": ("memory", mem.partitions), "atomic": ("atomic", mem.partitions),
-                 "rop": ("rop", gpu.rop.units)}
+    # per unit the core issues to: the shared units it loads, each (name, instances, bytes per operation's byte:
+    # None for a load of one per operation); a ROP's framebuffer reads and writes load the memory partitions too
+    memory = ("memory", mem.partitions, 1)
+    instances = {"coalescer": (memory,), "atomic": (("atomic", mem.partitions, None),),
+                 "rop": (("rop", gpu.rop.units, None),) + (((*memory[:2], 2),) if framebuffer_traffic(gpu) else ())}
     cache = pieces.loads if isinstance(pieces, Pieces) and pieces.loads is not None else None
-    if cache is None:                   # each piece's (unit, n, instance key, weight), and the run's loads
+    if cache is None:                   # each piece's [(unit, n, instance key, weight)], and the run's loads
         cache = {"keys": [], "every": {}}
         for pc in pieces:
-            unit = None if pc.instructions is not None else instances.get(entry_unit(plan.groups[pc.group].op))
-            if unit is None:
-                cache["keys"].append(None)
-                continue
-            name, n = unit
-            key = pc.pass_index * n + interleave(pc.address, mem.interleave_bytes, n)
-            weight = np.broadcast_to(np.asarray(pc.nbytes, np.float64) if name == "memory" else 1.0, key.shape)
-            cache["keys"].append((name, n, key, weight))
-            cache["every"][name] = cache["every"].get(name, 0) + np.bincount(key, weights=weight,
-                                                                             minlength=n_pass * n)
+            entries = [] if pc.instructions is not None else instances.get(entry_unit(plan.groups[pc.group].op), ())
+            cache["keys"].append([])
+            for name, n, per_byte in entries:
+                key = pc.pass_index * n + interleave(pc.address, mem.interleave_bytes, n)
+                weight = np.broadcast_to(1.0 if per_byte is None else per_byte * np.asarray(pc.nbytes, np.float64),
+                                         key.shape)
+                cache["keys"][-1].append((name, n, key, weight))
+                cache["every"][name] = cache["every"].get(name, 0) + np.bincount(key, weights=weight,
+                                                                                 minlength=n_pass * n)
         if isinstance(pieces, Pieces):
             pieces.loads = cache
     every, kept = cache["every"], {}
-    for entry, m in zip(cache["keys"], masks):
-        if entry is not None:
-            name, n, key, weight = entry
+    for entries, m in zip(cache["keys"], masks):
+        for name, n, key, weight in entries:
             kept[name] = kept.get(name, 0) + np.bincount(key[m], weights=weight[m], minlength=n_pass * n)
     out = {name: np.where(k > 0, every[name] / np.maximum(k, 1e-9), 1.0).reshape(n_pass, -1)
            for name, k in kept.items()}

@@ -42,6 +42,15 @@ class RopConfig:
     ops_per_cycle: float = param(0.5, unit="fragments/cycle", doc="operations committed per ROP unit per "
                                  "shader cycle", gt=0)
     latency: int = param(100, unit="cycles", doc="latency from commit to the framebuffer write landing", min=0)
+    memory_traffic: bool = param(True, doc="whether operations read and write the framebuffer through the "
+                                 "memory partitions (L2 and DRAM: a read and a write of each sector a warp "
+                                 "instruction's operations touch); false: an ideal ROP cache that holds the "
+                                 "whole framebuffer, so only the ROPs' own service counts")
+
+
+def framebuffer_traffic(gpu) -> bool:
+    """Whether ROP operations on ``gpu`` send their framebuffer reads and writes down the memory path."""
+    return bool(gpu.rop.memory_traffic)
 
 
 @register_unit
@@ -62,6 +71,10 @@ class RopUnit(Unit):
         super().__init__(config.units)
         self.env = machine.env
         mem = machine.gpu.memory
+        # the framebuffer reads and writes go down the memory path when they arrive (the reorder buffer and the
+        # ROP's queue hide their latency; they take the partitions' bandwidth from the shader cores' requests)
+        coalescer = machine.units.get("coalescer") if framebuffer_traffic(machine.gpu) else None
+        self.framebuffer = None if coalescer is None else coalescer.framebuffer
         self.icn, self.latency, self.entries = mem.interconnect_latency, config.latency, config.reorder_entries
         prog = machine.program
         _, _, wi_row = prog.storage(self.name)
@@ -114,6 +127,8 @@ class RopUnit(Unit):
         """The cycle the result is back (a depth or stencil test), or ``now`` when the warp need not wait; or
         an event to wait for (a free reorder-buffer entry, the result's commit) before issuing again."""
         a, b = self.lo[wi], self.hi[wi]
+        if self.framebuffer is not None and wi not in self.placed:
+            self.framebuffer(wi, (now + self.icn) * FP)
         for i in range(self.placed.get(wi, a), b):
             p = self.pred[i]
             if p >= 0 and self.commit[p] < 0:             # must wait for the previous op on its address

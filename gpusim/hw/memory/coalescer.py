@@ -14,6 +14,7 @@ the RMW-hazard analysis (gpusim.hw.hazards).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,20 +63,40 @@ class Coalescer(MemoryLevel):
         self._rmw = np.isin(prog.wi_op, [OPS.index(o) for o in RMW_OPS]).tolist()
         if any(self._rmw):
             self.rmw_starts = {}
-        if not len(wis):
-            return
-        R = prog.rows_of(self.name)
-        los = prog.row_lo[wis]
-        # part by part (arrays the allocator reuses), or all rows at once when there are many small parts
-        # (a k-buffer batch run: thousands), where numpy's per-call cost would dominate
+        chunks = self._unit_requests(self.name, wis, counts) if len(wis) else []
+        P = self.instances
+        if chunks:
+            self.requests = sum(np.bincount(q.partition, minlength=P) for q in chunks).tolist()
+            self.bytes = sum(np.bincount(q.partition, weights=q.nbytes, minlength=P) for q in chunks
+                             ).astype(np.int64).tolist()
+        # the ROPs' framebuffer traffic (gpusim.hw.rop) takes the same path from the next level on
+        from gpusim.hw.rop import framebuffer_traffic
+        rop_wis, rop_counts, _ = prog.storage("rop") if framebuffer_traffic(machine.gpu) else ((), (), ())
+        if len(rop_wis):
+            order = np.concatenate([wis, rop_wis])
+            chunks = [dataclasses.replace(q, order=order) for q in chunks]
+            for q in self._unit_requests("rop", rop_wis, rop_counts):
+                # a read of each sector, then its write (the blend, test or program's result)
+                chunks.append(Requests(np.repeat(q.rank + len(wis), 2), order, np.repeat(q.partition, 2),
+                                       np.repeat(q.address, 2), np.repeat(q.nbytes, 2)))
+            write[rop_wis] = True
+        if chunks:
+            self.next.prepare(chunks, write)
+
+    def _unit_requests(self, unit: str, wis: np.ndarray, counts: np.ndarray) -> list[Requests]:
+        """Coalesced requests of ``unit``'s rows (its instructions ``wis`` in row-storage order, with ``counts``
+        rows each): part by part (arrays the allocator reuses), or all rows at once when there are many small
+        parts (a k-buffer batch run: thousands), where numpy's per-call cost would dominate."""
+        R = self.program.rows_of(unit)
+        los = self.program.row_lo[wis]
         parts = (zip(R.parts, R.offsets()) if len(R.parts) <= 64
                  else [((None, R.address, R.nbytes, None), 0)])
-        chunks = [q for part, off in parts for q in self._requests(part, off, los, counts, wis)]
-        P = self.instances
-        self.requests = sum(np.bincount(q.partition, minlength=P) for q in chunks).tolist()
-        self.bytes = sum(np.bincount(q.partition, weights=q.nbytes, minlength=P) for q in chunks
-                         ).astype(np.int64).tolist()
-        self.next.prepare(chunks, write)
+        return [q for part, off in parts for q in self._requests(part, off, los, counts, wis)]
+
+    def framebuffer(self, wi: int, arrive_fp: int) -> int:
+        """A ROP instruction's framebuffer requests (reads and writes of the sectors its operations touch),
+        arriving at the next level at sub-cycle ``arrive_fp``: the cycle the last is served."""
+        return self._access(wi, arrive_fp, None)
 
     def _requests(self, part, off: int, los: np.ndarray, counts: np.ndarray, wis: np.ndarray,
                   chunk: int = 1 << 20) -> list[Requests]:
