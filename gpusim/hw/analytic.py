@@ -26,7 +26,9 @@ largest of
   ``coalescer.segment_bytes`` segment its lanes touch, of their bytes there in
   whole sectors), measured on every operation of the lanes of a sample of warps
   in runs spread over the group, x bytes, over all channels; with an L2, only
-  its misses (and the dirty lines they evict);
+  its misses (and the dirty lines they evict); the ROPs' framebuffer reads and
+  writes coalesce the same way (gpusim.hw.rop: a read and a write of each
+  sector, the write a hit in the L2 where there is one);
 * l2: with an L2, every request's bytes through the slices (see
   :class:`_L2Model` for its hits);
 * atomic: operations over all atomic units, and the hottest address

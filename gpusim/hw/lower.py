@@ -468,7 +468,8 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
 
 def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pass: int) -> dict | None:
     """A sample's ``Program.occupancy``: per shared unit, (passes, instances) factors, the whole run's load on
-    each instance in each pass (bytes on the memory partitions, operations on the atomic units and ROPs) over
+    each instance in each pass (bytes on the memory partitions, the ROPs' framebuffer reads and writes among
+    them; operations on the atomic units and ROPs) over
     the kept threads' (1 where they put none); None when every factor is 1. The run's loads are counted once
     per ``pieces`` (``Pieces.loads``)."""
     mem = gpu.memory

@@ -15,6 +15,14 @@ commit on the address, unit free) + service``, with a service of
 ``1 / rop.ops_per_cycle`` cycles for fixed-function operations and the
 blender's program time for ``program_blend``. A depth or stencil result
 reaches the core ``rop.latency`` + interconnect cycles after commit.
+
+Framebuffer traffic (``rop.memory_traffic``, on by default): when a warp
+instruction's operations arrive, the sectors they touch are read and written
+through the memory path after the coalescer (gpusim.hw.memory: the L2 slices
+where the GPU has them, else the DRAM channels), coalesced as the SM's requests
+are. The unit's queue hides the reads' latency, so a commit does not wait for
+them; they hold the partitions' bandwidth, which the cores' requests share, and
+the pass ends when the partitions have served them.
 """
 
 from __future__ import annotations
