@@ -11,8 +11,15 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   partitions, atomic units, ROPs: the same address interleaving, so the same
   hot partitions) and its latencies, and a request occupies it ``1/s`` as long
   as it is served (``Program.share``: the rest of the GPU's traffic); the quad
-  rasterizer runs at ``s`` of its rate, an L2 slice holds ``s`` of its lines,
-  the scoreboard ``s`` of its cells. The geometry front end is the GPU's: every
+  rasterizer runs at ``s`` of its rate, the scoreboard ``s`` of its cells.
+  The L2 (functional warming, as interval-sampling simulators warm caches): an
+  L2 slice holds the sample's share of the run's lines (the distinct lines the
+  sample's memory operations touch over the run's), and a line the run touches
+  ``n`` times and the sample ``k`` times is warm with probability ``1 - k/n``
+  (:func:`warm_lines`): the sample's first touch of it finds it, brought in by
+  the run's other threads, so the misses the sample scales up are the run's
+  compulsory misses, not one per line the sample happens to touch first (a
+  pixel's layers written by many sampled-out triangles). The geometry front end is the GPU's: every
   pass submits all its triangles and a warp starts when its own are out.
   Operations on an atomic word of which the sample keeps only some hold it as
   long as all of them (``Program.hold_scale``): a global counter's chain is as
@@ -52,9 +59,12 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import Workload, check_operations, lower, plan_pieces, thread_mapping
+from gpusim.hw.lower import INDEX_BASE, Workload, check_operations, hash32, lower, plan_pieces, thread_mapping
+from gpusim.hw.memory import MEMORY_OPS
+from gpusim.hw.memory.l2 import line_keys
 from gpusim.hw.program import Program
 from gpusim.hw.raster import per_triangle_cycles
+from gpusim.hw.rop import RopUnit, framebuffer_traffic
 from gpusim.opplan import OPS
 
 #: unit figures that add up over the work (a sample's are scaled up by its share); the others are kept as they are
@@ -108,19 +118,49 @@ def replicate_sms(gpu, program: Program) -> int:
     return max(sampled_sms(gpu), min(gpu.core.sms, round(kept / total * gpu.core.sms)))
 
 
-def scaled_gpu(gpu, sms: int):
-    """``gpu`` cut down to ``sms`` of its SMs: the quad rasterizer's rate, the L2 slices' lines, the scoreboard's
-    cells and the atomic units' rate in the same share (the other units' share is ``Program.share``)."""
-    if sms == gpu.core.sms:
-        return gpu
+def scaled_gpu(gpu, sms: int, lines: float | None = None):
+    """``gpu`` cut down to ``sms`` of its SMs: the quad rasterizer's rate and the scoreboard's cells in the same
+    share, the L2 slices' lines in the share ``lines`` (default the same; a sample holds that share of the run's
+    lines: :func:`line_touches`) (the other units' share is ``Program.share``)."""
     s = sms / gpu.core.sms
+    lines = s if lines is None else lines
+    if sms == gpu.core.sms and lines >= 1:
+        return gpu
     r = dataclasses.replace
     sections = {"core": r(gpu.core, sms=sms), "raster": r(gpu.raster, quads_per_cycle=gpu.raster.quads_per_cycle * s),
                 "scoreboard": r(gpu.scoreboard, entries=max(gpu.core.warp_size, round(gpu.scoreboard.entries * s)))}
     if gpu.l2.size_bytes:
         sets = gpu.l2.size_bytes // (gpu.l2.line_bytes * gpu.l2.ways)
-        sections["l2"] = r(gpu.l2, size_bytes=max(1, round(sets * s)) * gpu.l2.line_bytes * gpu.l2.ways)
+        sections["l2"] = r(gpu.l2, size_bytes=max(1, round(sets * min(1.0, lines))) * gpu.l2.line_bytes * gpu.l2.ways)
     return gpu.replace(**sections)
+
+
+def memory_path_addresses(gpu, parts) -> np.ndarray:
+    """Byte addresses of the operations among ``parts`` (``(op name, addresses)``) that go down the memory path
+    to the L2: the core's memory operations, and the ROPs' when they carry framebuffer traffic."""
+    ops = set(MEMORY_OPS) | (set(RopUnit.issued) if framebuffer_traffic(gpu) else set())
+    got = [np.asarray(a, np.int64) for op, a in parts if op in ops and len(a)]
+    every = np.concatenate(got) if got else np.zeros(0, np.int64)
+    return every[every < INDEX_BASE]     # not the software rasterizer's index and vertex buffers (whole blocks)
+
+
+def line_touches(gpu, address: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The L2 lines ``address`` touches (gpusim.hw.memory.l2.line_keys, ascending) and the touches of each."""
+    m = gpu.memory
+    return np.unique(line_keys(address, gpu.l2.line_bytes, m.interleave_bytes, m.partitions), return_counts=True)
+
+
+def warm_lines(every: tuple[np.ndarray, np.ndarray], kept: tuple[np.ndarray, np.ndarray], seed: int) -> np.ndarray:
+    """The lines whose first touch in a sample hits the L2 (``Program.l2_warm``): a line the run touches ``n``
+    times and the sample ``k`` times (``every``, ``kept``: :func:`line_touches` of the run and the sample) is first
+    brought in by one of the run's ``n`` touches, the sample's own with probability ``k / n``; otherwise the
+    touch of another thread brought it in, and the sample's first touch finds it (when the line is still in the
+    cache, which the scaled L2 decides). Drawn by a hash of the line, so the expected misses the sample scales
+    up are the run's compulsory misses: ``(k / n) / share`` per line, about one."""
+    lines, k = kept
+    at = np.minimum(np.searchsorted(every[0], lines), max(0, len(every[0]) - 1))
+    n = np.where(every[0][at] == lines, every[1][at], k) if len(every[0]) else k
+    return lines[hash32(lines, seed) >= (k / n * 2.0 ** 32)]
 
 
 def _stratified(weight: np.ndarray, present: np.ndarray, share: float, replicates: int,
@@ -317,6 +357,10 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     check_operations(work.plan, gpu)         # before the pieces, which hold every operation of the run
     rmw_all = rmw_threads(work.plan, work)
     pieces = plan_pieces(work)
+    every_lines = None                       # the run's L2 lines and touches of each (gpusim.hw.memory.l2)
+    if gpu.l2.size_bytes and share < 1:
+        every_lines = line_touches(gpu, memory_path_addresses(
+            gpu, [(work.plan.groups[pc.group].op, pc.address) for pc in pieces if pc.instructions is None]))
     runs: list[dict] = []
     machines: list[int] = []
     for r in range(reps.count):
@@ -331,7 +375,13 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         if fit != mine:
             mine, machine = fit, scaled_gpu(gpu, fit)
             program = lower(work, machine, keep, pieces=pieces)
-        program = dataclasses.replace(program, front_end_cycles=front)
+        warm = None
+        if every_lines is not None:          # the L2 holds the sample's share of the run's lines, warm where others
+            kept = line_touches(gpu, memory_path_addresses(          # bring a line in before the sample does
+                gpu, [(OPS[op], a) for u in program.row_sets.values() for op, a, _, _ in u.parts]))
+            machine = scaled_gpu(gpu, mine, len(kept[0]) / max(1, len(every_lines[0])))
+            warm = warm_lines(every_lines, kept, gpu.sample.seed + r)
+        program = dataclasses.replace(program, front_end_cycles=front, l2_warm=warm)
         for pp in program.passes:        # a flush's full-screen quad: each SM its share of the GPU's warps
             pp.flush_warps = -(-pp.flush_warps // gpu.core.sms) * mine
         runs.append(_replicate(work, machine, program, rmw_all))

@@ -20,8 +20,19 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.hw.memory.level import MemoryLevel, Requests
-from gpusim.hw.unit import FP, BUSY, REQUESTS, UTILISATION, Stat, div, fp_costs, register_unit, within_instance
+from gpusim.hw.unit import (FP, BUSY, REQUESTS, UTILISATION, Stat, div, fp_costs, interleave, register_unit,
+                            within_instance)
 from gpusim.metrics.composite import run_starts
+
+
+#: an L2 line's key: its partition above this bit, its line number in the partition's share below
+WARM_SHIFT = 40
+
+
+def line_keys(address: np.ndarray, line_bytes: int, interleave_bytes: int, partitions: int) -> np.ndarray:
+    """The L2 line of each byte address, as one integer: partition ``<< WARM_SHIFT |`` line in its share."""
+    return ((interleave(address, interleave_bytes, partitions) << WARM_SHIFT)
+            | div(within_instance(address, interleave_bytes, partitions), line_bytes))
 
 
 @dataclass(frozen=True)
@@ -65,6 +76,10 @@ class L2Slice(MemoryLevel):
         # a sampled program (gpusim.hw.unit.occupancy): what the rest of the GPU's requests add to a slice after
         # the instruction that came with them, and that instruction
         self.after, self.last = [0] * self.instances, [-1] * self.instances
+        # a sample (gpusim.hw.sample.warm_lines): lines the run's other threads bring in before the sample's first
+        # touch, which that touch finds (once: a later miss on the line is the sample's own)
+        warm = getattr(self.program, "l2_warm", None)
+        self.warm = set(warm.tolist()) if warm is not None and len(warm) else None
 
     @classmethod
     def present(cls, config: L2Config) -> bool:
@@ -103,12 +118,17 @@ class L2Slice(MemoryLevel):
             d[tag] = d.pop(tag) or write
             self.hits[p] += 1
             return True, False
-        self.misses[p] += 1
+        warm = self.warm is not None and (p << WARM_SHIFT | line) in self.warm
+        if warm:
+            self.warm.discard(p << WARM_SHIFT | line)
+            self.hits[p] += 1
+        else:
+            self.misses[p] += 1
         evict = False
         if len(d) >= self.ways:
             evict = d.pop(next(iter(d)))
         d[tag] = write
-        return False, evict
+        return warm, evict and not warm
 
     def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
         reqs, write = self.table[wi]
