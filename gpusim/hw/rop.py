@@ -2,7 +2,8 @@
 
 Fixed-function raster operations (``blend``, ``depth_test``, ``stencil``) and
 programmable-blender invocations (``program_blend``, gpusim.hw.blender) go to
-ROP unit ``(address // memory.interleave_bytes) % rop.units``. Operations on
+the ROP unit its ``memory.interleave_bytes`` block maps to (gpusim.hw.unit.interleave, over
+``rop.units``). Operations on
 one address (one pixel's value) commit in submission order (primitive order),
 which keeps blending correct however the shader cores interleave fragments:
 an operation that arrives before the previous one on its address waits in the

@@ -70,8 +70,21 @@ def mod(a, d: int):
 
 def interleave(address, granularity: int, instances: int):
     """The instance serving each byte address when addresses are interleaved across ``instances`` in
-    blocks of ``granularity`` bytes: partitions, ROP units. The one address-to-unit map of the model."""
-    return mod(div(address, granularity), instances)
+    blocks of ``granularity`` bytes: partitions, ROP units. The one address-to-unit map of the model.
+
+    Block ``b`` goes to ``(b + b // n + b // n**2 + b // n**3) mod n`` (``n`` instances): consecutive blocks
+    go round the instances, and each further run of ``n`` blocks starts one instance on (the sum of ``b``'s
+    base-``n`` digits, the last three folded in). A stride of a multiple of ``n`` blocks, such as a render
+    target's rows (128 pixels of 16 bytes are 8 blocks of 256), then spreads over every instance instead of
+    landing a screen column on each; GPUs hash their partition bits for the same reason. For a fixed
+    ``b // n`` the map is a permutation of the ``n`` instances, so :func:`within_instance` numbers each
+    instance's share one to one."""
+    b = div(address, granularity)
+    if instances == 1:
+        return mod(b, 1)
+    q = div(b, instances)
+    q2 = div(q, instances)
+    return mod(b + q + q2 + div(q2, instances), instances)
 
 
 def within_instance(address, granularity: int, instances: int):

@@ -2,8 +2,8 @@
 
 Lanes touching one ``coalescer.segment_bytes`` segment make one request, of
 the bytes they touch rounded up to 32-byte sectors (at most the segment); an
-access wider than a segment touches several. Requests go to partition
-``(address // memory.interleave_bytes) % memory.partitions`` and on to the
+access wider than a segment touches several. Requests go to the partition
+of their ``memory.interleave_bytes`` block (gpusim.hw.unit.interleave) and on to the
 next level after ``memory.interconnect_latency``; the result is back at the
 core that long after the last request is served.
 
