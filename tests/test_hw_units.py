@@ -396,3 +396,16 @@ def test_an_sms_schedulers_issue_side_by_side(schedulers, cycles):
 def test_schedulers_must_divide_the_lanes():
     with pytest.raises(ConfigError, match="schedulers"):
         load_gpu("gtx280", ["core.lanes_per_sm=8", "core.schedulers=3"])
+
+
+@pytest.mark.parametrize("n", [1, 3, 4, 8, 16, 32])
+def test_interleave_spreads_strided_rows_and_keeps_each_share_one_to_one(n):
+    from gpusim.hw.unit import interleave, within_instance
+    address = np.arange(0, 1 << 22, 4, dtype=np.int64)
+    part, offset = interleave(address, 256, n), within_instance(address, 256, n)
+    assert len(np.unique(part * (1 << 40) + offset)) == len(address)      # (instance, offset) names one byte
+    assert np.array_equal(interleave(np.arange(n) * 256, 256, n), np.arange(n))   # consecutive blocks go round
+    # a 128x128 target of 16-byte pixels: its rows are 8 blocks; the 32 middle columns of every row
+    x, y = np.meshgrid(np.arange(48, 80), np.arange(128))
+    load = np.bincount(interleave((y * 128 + x).ravel() * 16, 256, n), minlength=n)
+    assert load.max() <= 1.2 * load.mean()               # a plain b mod 8 put them on 2 of 8 partitions
