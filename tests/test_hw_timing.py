@@ -197,7 +197,7 @@ def test_sampled_hazards_never_exceed_the_fragments_that_could_have_one():
 
 
 def test_a_valid_config_never_deadlocks_on_a_full_reorder_buffer():
-    # 300 fragments on one pixel through the R-buffer's recirculation on 2 SMs, one reorder entry per ROP: each SM
+    # 300 fragments on one pixel through the R-buffer's recirculation on 3 SMs, one reorder entry per ROP: each SM
     # fills its buffers with operations whose predecessors sit in warps that cannot issue (before, this stopped
     # with "no progress"). When every warp waits and nothing is left to happen, the buffer with the oldest stalled
     # operation takes one entry more (counted as an overflow), as in-order launch would have reserved it.
@@ -206,7 +206,7 @@ def test_a_valid_config_never_deadlocks_on_a_full_reorder_buffer():
     from conftest import make_trace
     n = 300
     trace = make_trace(np.zeros(n, int), np.zeros(n, int), np.random.default_rng(1).random(n), width=8, height=8)
-    gpu = load_gpu("gtx280", ["rop.reorder_entries=1", "core.sms=2", "runner.no_progress_cycles=100000"])
+    gpu = load_gpu("gtx280", ["rop.reorder_entries=1", "core.sms=3", "runner.no_progress_cycles=100000"])
     runs = [replay(trace, "r-buffer", {}, "full", gpu)[1]["timing"] for _ in range(2)]
     assert runs[0]["cycles"] == runs[1]["cycles"]
     assert runs[0]["units"]["rop"]["overflows"] >= 1
