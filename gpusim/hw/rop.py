@@ -62,6 +62,12 @@ def framebuffer_traffic(gpu) -> bool:
     return bool(gpu.rop.memory_traffic)
 
 
+def framebuffer_operations(gpu) -> frozenset:
+    """The ROP operations whose framebuffer reads and writes go down the memory path on ``gpu`` (none with
+    ``rop.memory_traffic`` off)."""
+    return RopUnit.issued if framebuffer_traffic(gpu) else frozenset()
+
+
 @register_unit
 class RopUnit(Unit):
     name = "rop"

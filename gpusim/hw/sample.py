@@ -64,7 +64,7 @@ from gpusim.hw.memory import MEMORY_OPS
 from gpusim.hw.memory.l2 import line_keys
 from gpusim.hw.program import Program
 from gpusim.hw.raster import per_triangle_cycles
-from gpusim.hw.rop import RopUnit, framebuffer_traffic
+from gpusim.hw.rop import framebuffer_operations
 from gpusim.opplan import OPS
 
 #: unit figures that add up over the work (a sample's are scaled up by its share); the others are kept as they are
@@ -138,7 +138,7 @@ def scaled_gpu(gpu, sms: int, lines: float | None = None):
 def memory_path_addresses(gpu, parts) -> np.ndarray:
     """Byte addresses of the operations among ``parts`` (``(op name, addresses)``) that go down the memory path
     to the L2: the core's memory operations, and the ROPs' when they carry framebuffer traffic."""
-    ops = set(MEMORY_OPS) | (set(RopUnit.issued) if framebuffer_traffic(gpu) else set())
+    ops = MEMORY_OPS | framebuffer_operations(gpu)
     got = [np.asarray(a, np.int64) for op, a in parts if op in ops and len(a)]
     every = np.concatenate(got) if got else np.zeros(0, np.int64)
     return every[every < INDEX_BASE]     # not the software rasterizer's index and vertex buffers (whole blocks)

@@ -118,9 +118,9 @@ class L2Slice(MemoryLevel):
             d[tag] = d.pop(tag) or write
             self.hits[p] += 1
             return True, False
-        warm = self.warm is not None and (p << WARM_SHIFT | line) in self.warm
-        if warm:
-            self.warm.discard(p << WARM_SHIFT | line)
+        warm = self.warm is not None and (key := p << WARM_SHIFT | line) in self.warm
+        if warm:                     # the run's other threads brought it in: they, not the sample, paid for it
+            self.warm.remove(key)
             self.hits[p] += 1
         else:
             self.misses[p] += 1
@@ -128,7 +128,7 @@ class L2Slice(MemoryLevel):
         if len(d) >= self.ways:
             evict = d.pop(next(iter(d)))
         d[tag] = write
-        return warm, evict and not warm
+        return warm, evict and not warm      # (as is the write-back of a dirty line a warm fill evicts)
 
     def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
         reqs, write = self.table[wi]

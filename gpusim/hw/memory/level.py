@@ -96,8 +96,8 @@ class MemoryLevel(Unit):
     def needed(cls, program, gpu) -> bool:
         """On the path and present, and reached: by the core's memory operations, or by the ROPs' framebuffer
         traffic (gpusim.hw.rop)."""
-        from gpusim.hw.rop import RopUnit, framebuffer_traffic
-        framebuffer = framebuffer_traffic(gpu) and bool(RopUnit.issued & program.operation_names())
+        from gpusim.hw.rop import framebuffer_operations
+        framebuffer = bool(framebuffer_operations(gpu) & program.operation_names())
         return (cls.name in gpu.memory.levels and cls.present(getattr(gpu, cls.name))
                 and (framebuffer or super().needed(program, gpu)))
 
