@@ -61,6 +61,32 @@ def test_opstream_rows_match_access_counts_and_program_order(name, random_trace)
     assert len(frame) == len(stream)
 
 
+LAYOUT_VARIANTS = [(name, {}) for name in ALL] + [
+    ("kbuffer", {"hw": "blender"}), ("kbuffer", {"hw": "blender", "mode": "sort-blend"}),
+    ("kbuffer", {"hw": "scoreboard", "entry": "rgbz", "k": 4, "uniform_alpha": 0.5}),
+    ("kbuffer", {"entry": "z", "k": 16, "uniform_alpha": 0.5}), ("multipass-kbuffer", {"hw": "blender"}),
+    ("mlab", {"hw": "rov"}), ("mlab", {"layers": 2})]
+
+
+@pytest.mark.parametrize("name,params", LAYOUT_VARIANTS, ids=lambda v: v if isinstance(v, str) else
+                         "-".join(f"{k}={x}" for k, x in v.items()) or "default")
+def test_no_two_operations_of_a_group_overlap_in_part(name, params, random_trace):
+    """An operation's bytes either are another's (the same record) or do not meet them: a record that runs
+    into its neighbour's is a layout error, and it would let the coalescer and the ROPs' framebuffer traffic
+    merge accesses that are apart (a pixel's 4 entries addressed at 8 bytes a pixel)."""
+    plan = run(name, random_trace, **params).plan
+    for g in plan.groups:
+        if g.is_compute:
+            continue
+        i, seq = g.expand_ops()
+        address = np.asarray(g.offset(i, seq), np.int64)
+        nbytes = np.broadcast_to(np.asarray(g.bytes(i, seq) if callable(g.bytes) else g.bytes, np.int64),
+                                 address.shape)
+        starts, first = np.unique(address, return_index=True)
+        ends = starts + nbytes[first]
+        assert (starts[1:] >= ends[:-1]).all(), f"{name} {params}: a {g.op} on {g.structure} overlaps the next"
+
+
 @pytest.mark.parametrize("name", ALL)
 def test_deterministic_and_empty_trace(name, random_trace):
     a, b = run(name, random_trace), run(name, random_trace)

@@ -46,7 +46,10 @@ Hardware (``hw``, section 3.1):
 * ``scoreboard`` (proposal 1): the same, behind a ``scoreboard`` dispatch
   operation that holds a fragment back while its pixel is in flight.
 * ``blender`` (proposal 2): one ``program_blend`` per fragment at the ROP,
-  reading and writing the pixel's k entries in submission order.
+  reading and writing the pixel's k entries in submission order; the entries
+  are then the pixel's record, adjacent (one access of all of them), and in
+  ``sort-blend`` the colour the program emits goes through the ROP's ``blend``
+  into the framebuffer.
 
 ALU work beyond each operation's own (gpusim.schemes.common.alu): between its
 reads and writes a fragment's program inserts itself into the k sorted entries,
@@ -76,7 +79,8 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, compare_exchange
-from gpusim.schemes.common.arrays import entry_index, pixel_key, smallest_per_pixel, sort_short_runs
+from gpusim.schemes.common.arrays import (entry_index, pixel_key, record_layout, smallest_per_pixel,
+                                          sort_short_runs)
 from gpusim.schemes.common.depth_filter import emit_order
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC, EntryFormat, access_layout,
@@ -150,7 +154,7 @@ class KBuffer(Scheme):
         add_rmw(plan, frag_pass, n, pix, P, k, fmt, cf, self.hw, framebuffer=blend, extra=composite)
         pixels = P
         plan.add(resolve, "load", "kbuffer", pixels, slots,
-                 lambda i, s: entry_index(i, s, slots, P, "layer-major") * slot_bytes, slot_bytes)
+                 lambda i, s: entry_index(i, s, slots, P, record_layout(self.hw)) * slot_bytes, slot_bytes)
         if blend:
             plan.add(resolve, "load", "framebuffer", pixels, 1, lambda i, s: i * FRAMEBUFFER_BYTES,
                      FRAMEBUFFER_BYTES)
@@ -254,14 +258,17 @@ def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count
     ``threads``: the fragment threads (an array, or n for 0..n-1); ``pix[i]`` the pixel of thread ``i``.
     ``hw`` as :class:`KBuffer`'s: an ``rmw_read`` of each of the pixel's k entries (of each of its ceil(k / 4)
     texels with ``entry = z``), the insertion into the k sorted entries (plus ``extra`` instructions per
-    thread), as many ``rmw_write`` s, behind a ``scoreboard`` dispatch with ``scoreboard``; or one
-    ``program_blend`` with ``blender``. ``framebuffer``: sort-and-blend's RGBA32F target is read and written too.
+    thread), as many ``rmw_write`` s, behind a ``scoreboard`` dispatch with ``scoreboard``, the entry texels in
+    ``slots`` render targets; or with ``blender`` one ``program_blend`` on the pixel's record, its entry texels
+    adjacent (:func:`gpusim.schemes.common.arrays.record_layout`). ``framebuffer``: sort-and-blend's RGBA32F
+    target is read and written too (by the shader, or by the ROP's blend stage after the program).
     ``count`` and ``seq_pass``: thread ``i`` repeats its RMW in passes ``seq_pass[0 .. count[i] - 1]`` (the
     multi-pass k-buffer's peels), one group per entry texel, so the plan holds each thread once however many
     passes it takes part in.
     """
     slots, slot_bytes = access_layout(entry, colour_format, k)
-    at = lambda i, s: entry_index(pix[i], s, slots, pixel_count, "layer-major") * slot_bytes  # noqa: E731  (MRT planes)
+    layout = record_layout(hw)
+    at = lambda i, s: entry_index(pix[i], s, slots, pixel_count, layout) * slot_bytes  # noqa: E731
 
     def entries(op: str, dep: bool) -> None:
         """``op`` on each of the pixel's entry texels: ``slots`` ops a thread, or a group per texel across passes."""
@@ -272,16 +279,18 @@ def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count
             plan.add(pass_index, op, "kbuffer", threads, count, lambda i, s, t=texel: at(i, t), slot_bytes, dep=dep,
                      seq_pass=seq_pass)
 
+    fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
     if hw == "blender":
-        program_bytes = slots * slot_bytes + (FRAMEBUFFER_BYTES if framebuffer else 0)
-        plan.add(pass_index, "program_blend", "kbuffer", threads, count, lambda i, s: pix[i] * slot_bytes,
-                 program_bytes, seq_pass=seq_pass)
+        record = slots * slot_bytes
+        plan.add(pass_index, "program_blend", "kbuffer", threads, count, lambda i, s: pix[i] * record, record,
+                 seq_pass=seq_pass)
+        if framebuffer:                  # the colour the program emits, blended into the target
+            plan.add(pass_index, "blend", "framebuffer", threads, count, fb, FRAMEBUFFER_BYTES, seq_pass=seq_pass)
         return
     if hw == "scoreboard":
         plan.add(pass_index, "scoreboard", "kbuffer", threads, count, lambda i, s: pix[i] * slot_bytes, 0,
                  seq_pass=seq_pass)
     entries("rmw_read", hw == "scoreboard")
-    fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
     if framebuffer:
         plan.add(pass_index, "rmw_read", "framebuffer", threads, count, fb, FRAMEBUFFER_BYTES, seq_pass=seq_pass)
     # modify: insert into the k sorted entries (a compare-exchange of the depth and what the entry holds beside it)

@@ -18,10 +18,12 @@ inserted fragment, a merge) is rounded to the format. ``rgba16f`` and ``rgba32f`
 
 Ordering (``hw``): the read-modify-write of a pixel's entries is ordered, never a hazard. ``blender``
 models it as the ROP's programmable blender (``program_blend``: the fragment's insertion and merge run at
-the ROP on the ``layers`` entries, committed in submission order, as the k-buffer's proposal 2); ``rov``
+the ROP on the ``layers`` entries, committed in submission order, as the k-buffer's proposal 2; the
+entries are then the pixel's record, adjacent, as a multisampled pixel's samples); ``rov``
 as a rasterizer-ordered view on the SM (Intel's PixelSync, the paper's platform): the pixel's interlock
 (the ``scoreboard`` operation holds a fragment while another of its pixel is in flight), then ``layers``
-reads, the insertion and merge on the SM, and ``layers`` writes.
+reads, the insertion and merge on the SM, and ``layers`` writes, an entry in each of ``layers`` render
+targets (gpusim.schemes.common.arrays.record_layout).
 
 The functional model places each pixel's first ``layers`` fragments with one sort (they never merge) and runs
 every later one's insertion and merge in a compiled kernel (gpusim.jit) where numba is installed, else rank
@@ -46,7 +48,7 @@ from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, MLAB_FRAGMENT, MLAB_MERGE, compare_exchange
 from gpusim.metrics.composite import runs_by_length
-from gpusim.schemes.common.arrays import entry_index, lex_order, put_rows, rank_in_runs, take_rows
+from gpusim.schemes.common.arrays import entry_index, lex_order, put_rows, rank_in_runs, record_layout, take_rows
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.storage import COLOUR_BYTES, DEPTH_BYTES, ColourFormat, rounder
 from gpusim.schemes.result import SchemeResult, Stat, Structure
@@ -170,17 +172,18 @@ class MultiLayerAlphaBlending(Scheme):
                   Pass("resolve", "fullscreen", "pixel")]
         plan = OpPlan(passes, ["layers"])
         plan.add(0, "store", "layers", P * L, 1, lambda i, s: i * entry, entry)
+        layout = record_layout(self.hw)
         plan.compute(1, frags, MLAB_FRAGMENT, dep=False)
-        if self.hw == "blender":
-            plan.add(1, "program_blend", "layers", frags, 1, lambda i, s: pix[frags[i]] * entry, L * entry)
+        if self.hw == "blender":               # the program on the pixel's record: its L entries adjacent
+            plan.add(1, "program_blend", "layers", frags, 1, lambda i, s: pix[frags[i]] * (L * entry), L * entry)
         else:
-            at = lambda i, s: entry_index(pix[frags[i]], s, L, P, "layer-major") * entry  # noqa: E731
+            at = lambda i, s: entry_index(pix[frags[i]], s, L, P, layout) * entry  # noqa: E731
             plan.add(1, "scoreboard", "layers", frags, 1, lambda i, s: pix[frags[i]] * entry, 0)
             plan.add(1, "rmw_read", "layers", frags, L, at, entry, dep=True)
             plan.compute(1, frags, L * compare_exchange(cb) + MLAB_MERGE)
             plan.add(1, "rmw_write", "layers", frags, L, at, entry, dep=True)
         pixels = P
-        plan.add(2, "load", "layers", pixels, L, lambda i, s: entry_index(i, s, L, P, "layer-major") * entry, entry)
+        plan.add(2, "load", "layers", pixels, L, lambda i, s: entry_index(i, s, L, P, layout) * entry, entry)
         plan.compute(2, pixels, occupied * COMPOSITE)
 
         arrival = g.by_arrival                              # kept fragments in arrival order

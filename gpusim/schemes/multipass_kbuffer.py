@@ -42,7 +42,7 @@ from gpusim.config import param
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, PEEL_TEST
-from gpusim.schemes.common.arrays import entry_index, lex_order
+from gpusim.schemes.common.arrays import entry_index, lex_order, record_layout
 from gpusim.schemes.common.groups import PixelGroups
 from gpusim.schemes.common.kbuffer_entries import (ENTRY_DOC, UNIFORM_ALPHA_DOC, EntryFormat, access_layout,
                                                    check_entry, entry_bytes, entry_image, per_access, resolve_alpha,
@@ -134,6 +134,7 @@ class MultipassKBuffer(Scheme):
         add_rmw(plan, peel_at[0], n, pix, P, k, fmt, cf, self.hw, count=takes_part,
                 seq_pass=np.asarray(peel_at[:m], np.int64))
         # the pixels with entries, pass by pass: read, composite, blend in, keep the peel depth, empty the entries
+        layout = record_layout(self.hw)
         captured = np.flatnonzero(kept_sorted)                              # positions in depth order
         by_pass = captured[lex_order(pass_sorted[captured])]                # pass by pass, each grouped by pixel
         cuts = np.searchsorted(pass_sorted[by_pass], np.arange(m + 1))
@@ -143,7 +144,7 @@ class MultipassKBuffer(Scheme):
             done = pk[first]
             stored = np.diff(np.r_[np.flatnonzero(first), len(pk)])
             r = resolve_at[p]
-            slot = lambda i, s, d=done: entry_index(d[i], s, slots, P, "layer-major") * slot_bytes  # noqa: E731
+            slot = lambda i, s, d=done: entry_index(d[i], s, slots, P, layout) * slot_bytes  # noqa: E731
             plan.add(r, "load", "kbuffer", done, slots, slot, slot_bytes)
             plan.compute(r, done, stored * (COMPOSITE + resolve_alu(fmt)))
             plan.add(r, "blend", "accumulation", done, 1, lambda i, s, d=done: d[i] * FRAMEBUFFER_BYTES,

@@ -25,6 +25,17 @@ def entry_index(pixel: np.ndarray, slot: np.ndarray, layers: int, pixel_count: i
     return slot * pixel_count + pixel
 
 
+def record_layout(hw: str) -> Layout:
+    """Where a pixel's fixed array of entries lies for the unit that updates it (``hw``, a scheme's parameter).
+
+    A programmable blender (``blender``) reads and writes the pixel's whole array in one operation, so the
+    array is the pixel's own record, its entries adjacent (``pixel-major``, as a multisampled pixel's samples
+    are stored). Shader read-modify-writes (``texture-rmw``, ``scoreboard``, ``rov``) access one entry texel
+    at a time, one render target per entry texel (``layer-major``: the MRT planes).
+    """
+    return "pixel-major" if hw == "blender" else "layer-major"
+
+
 def pixel_key(pix: np.ndarray, value: np.ndarray) -> np.ndarray:
     """uint64 ``pix << 32 | value``: sorting it groups by pixel and orders by the 32-bit value."""
     return (np.asarray(pix).astype(np.uint64) << np.uint64(32)) | np.asarray(value).astype(np.uint64)
