@@ -68,7 +68,7 @@ from gpusim.hw.lower import (PRODUCES, _quads_so_far, _raster_positions, scorebo
                              thread_mapping)
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.memory.coalescer import WRITE_OPS
-from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, distinct_quads, per_triangle_cycles
+from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, per_triangle_cycles
 from gpusim.hw.rop import framebuffer_traffic
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import address_ids, entry_unit, interleave
@@ -112,26 +112,25 @@ WHOLE_GROUPS = 2      # lane information of whole groups kept from pass to pass 
 
 
 class _QuadMemo:
-    """Quads of a pass's fragments, computed once per distinct set of fragments (depth peeling's thousands of
-    passes run over the same ones)."""
+    """Quads of a pass's fragments: the count computed once per distinct set of fragments (depth peeling's
+    thousands of passes run over the same ones), the per-lane running count kept for the last set."""
 
     def __init__(self):
         self.seen: dict[tuple, int] = {}
-        self.last: tuple = (None, 0)
+        self.last: tuple = (None, None)
 
     def quads(self, keys: np.ndarray, work) -> int:
-        if keys is self.last[0]:               # the same lanes' keys as the pass before
-            return self.last[1]
-        self.last = (keys, self._quads(keys, work))
-        return self.last[1]
-
-    def _quads(self, keys: np.ndarray, work) -> int:
+        """How many 2x2 quads the lanes ``keys`` fill."""
         fingerprint = (len(keys), int(keys[0]), int(keys[-1]), int(keys.sum()), int((keys * keys).sum()))
-        got = self.seen.get(fingerprint)
-        if got is None:
-            got = self.seen[fingerprint] = distinct_quads(work.frag_prim[keys], work.frag_pixel[keys], work.width,
-                                                          work.height)
-        return got
+        if fingerprint not in self.seen:
+            self.seen[fingerprint] = int(self.so_far(keys, work)[-1])
+        return self.seen[fingerprint]
+
+    def so_far(self, keys: np.ndarray, work) -> np.ndarray:
+        """Per lane: the quads emitted by the time its own is (gpusim.hw.lower's ``_quads_so_far``)."""
+        if keys is not self.last[0]:
+            self.last = (keys, _quads_so_far(work, keys))
+        return self.last[1]
 
 
 def _distinct(a: np.ndarray) -> int:
@@ -532,12 +531,12 @@ class _ReadyMemo:
     def __init__(self):
         self.last: tuple = (None, None, None)
 
-    def ready(self, pk, keys: np.ndarray, warps: "_PassWarps", work, gpu) -> np.ndarray:
+    def ready(self, pk, keys: np.ndarray, warps: "_PassWarps", work, gpu, quad_memo: _QuadMemo) -> np.ndarray:
         memo = (keys, submitted_triangles(pk, work), warps.n)
         if self.last[0] is keys and self.last[1] == memo[1:]:
             return self.last[2]
         _, position = _raster_positions(work, pk, keys)
-        quads = _quads_so_far(work, keys)
+        quads = quad_memo.so_far(keys, work)
         w = warps.of(keys)
         runs = run_starts(w)
         out = np.zeros(warps.n)
@@ -1239,7 +1238,7 @@ class _PassTimer:
                                    warps.quads / gpu.raster.quads_per_cycle)
             # a warp starts once the front end has its fragments out, so a unit serves each warp's work only after
             # that, and the last warps' chains run after the front end is done
-            ready = self.ready_memo.ready(pk, lane_keys, warps, work, gpu)
+            ready = self.ready_memo.ready(pk, lane_keys, warps, work, gpu, quad_memo)
             demand["issue"] = warp_issue
             fed_by = [_fed(ready, d, c.issue_ports if u == "issue" else 1) for u, d in demand.items()]
             # the front end's last warps' chains, and their own work, end after it (the raster bound's tail);

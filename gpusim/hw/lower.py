@@ -38,7 +38,7 @@ from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, interleave, mod
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OPS, OpPlan
-from gpusim.schemes.common.arrays import rank_in_runs
+from gpusim.schemes.common.arrays import lex_sorted, rank_in_runs
 from gpusim.schemes.common.reorder import submitted_primitives
 
 #: operations whose result a later dependent operation waits for
@@ -594,7 +594,8 @@ def _quads_so_far(work: Workload, lane_keys: np.ndarray) -> np.ndarray:
     this lane's (a quad counts at its first fragment)."""
     q = quad_ids(work.frag_prim[lane_keys], work.frag_pixel[lane_keys], work.width, work.height)
     first = np.zeros(len(q), bool)
-    first[np.unique(q, return_index=True)[1]] = True
+    order, ascending = lex_sorted(q)        # a stable sort: each quad's first lane leads its run
+    first[order[run_starts(ascending)]] = True
     return np.cumsum(first)
 
 

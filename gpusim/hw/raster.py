@@ -112,13 +112,6 @@ def quad_ids(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> np
     return np.asarray(prim, np.int64) * (qw * qh) + (pixel // width // 2) * qw + (pixel % width) // 2
 
 
-def distinct_quads(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> int:
-    """How many 2x2 quads the fragments (triangle ``prim``, ``pixel``) fill (a sort and a count: numpy's
-    hashing ``unique`` is 20x slower on millions of fragments)."""
-    q = np.sort(quad_ids(prim, pixel, width, height))
-    return int(np.count_nonzero(q[1:] != q[:-1])) + 1 if len(q) else 0
-
-
 def bbox_pixels(prim: np.ndarray, pixel: np.ndarray, width: int, triangles: int) -> np.ndarray:
     """Per triangle ``0..triangles-1``, the pixels of its fragments' bounding box (at least 1: a triangle that
     covers no pixel centre still tests the pixel its bounding box rounds to). Fragments in triangle order take
