@@ -188,3 +188,25 @@ def test_a_triangle_sample_finds_the_lines_other_triangles_brought_in(spheres):
     sampled = replay(spheres, "freepipe-abuffer", {}, "sampled", gpu)[1]["timing"]
     assert sampled["units"]["l2"]["misses"] == pytest.approx(full["units"]["l2"]["misses"], rel=0.2)
     assert sampled["cycles"] == pytest.approx(full["cycles"], rel=0.1)
+
+
+def test_the_heaviest_warp_of_a_pass_is_in_every_replicate(spheres):
+    # LucidRaster's raster passes run a warp per bin, a few warps per SM: the pass ends with its heaviest warp.
+    # Ranked by their operations, that warp is in every replicate and the others in one at most; the sampled
+    # cycles then come within 3% of the full level's (2.1% here; 10.2% short when warps were ranked by
+    # position, none certain)
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    result, _, _ = run_functional(spheres, "lucidraster", {})
+    work = Workload.of(result, spheres)
+    reps = Replicates(work, gpu, sampled_sms(gpu) / gpu.core.sms)
+    pieces = plan_pieces(work)
+    p = [pk.name for pk in work.plan.passes].index("raster-high")
+    threads = [pc.thread for pc in pieces if pc.pass_index == p]
+    lanes, chosen = reps.warps(p, threads)
+    ops = np.bincount(np.searchsorted(lanes, np.concatenate(threads)) // gpu.core.warp_size)
+    overlap = chosen.sum(axis=0)
+    assert overlap[ops.argmax()] == gpu.sample.replicates
+    assert (np.delete(overlap, ops.argmax()) <= 1).all()
+    full = replay(spheres, "lucidraster", {}, "full", gpu)[1]["timing"]
+    sampled = replay(spheres, "lucidraster", {}, "sampled", gpu)[1]["timing"]
+    assert sampled["cycles"] == pytest.approx(full["cycles"], rel=0.03)

@@ -33,9 +33,14 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   cut into ``round(s x units)`` strata of equal count, and each replicate takes
   one unit of each stratum at random, each replicate another one while the
   stratum has enough: the ``sample.replicates`` replicates are disjoint
-  stratified samples of one design. Thread blocks: each replicate a disjoint
-  pseudo-random share ``s``. A pass of which a replicate keeps no thread keeps
-  one unit's threads (its latency chain is the pass's floor).
+  stratified samples of one design. Warps of threads that fill them in order
+  are stratified the same way, by their pixels' fragments (pixel threads) or
+  by their operations (others). The deepest pixel's tile and warp, the largest
+  triangle's block and the warp with the most operations are in every
+  replicate: the longest chain of dependent operations decides a pass of few
+  warps (LucidRaster's bins: without its heaviest warp the sample ran its
+  raster passes 10-40% short). A pass of which a replicate keeps no thread
+  keeps one unit's threads (its latency chain is the pass's floor).
 * The estimate. Each replicate's pass cycles estimate the run's: the level
   reports their mean, per pass and in all, and from the replicates' totals
   ``T_1..T_R`` the standard error ``SE = sd(T) / sqrt(R)``, the 95% confidence
@@ -233,15 +238,21 @@ class Replicates:
 
     def warps(self, p: int, threads: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """A pass whose threads fill warps in order: its lanes (sorted) and the replicates' choice of its warps,
-        stratified by their fragments (pixel threads) or their position (others)."""
+        stratified by their fragments (pixel threads) or their operations (others), the deepest pixel's warp
+        or the warp with the most operations in every replicate (the longest chain of a latency-bound pass:
+        a pass of few warps ends with its heaviest)."""
         if p not in self.lanes:
-            lanes = _distinct(np.concatenate(threads))
+            every = np.concatenate(threads)
+            lanes = _distinct(every)
             ws = self.gpu.core.warp_size
             n = -(-len(lanes) // ws)
             pixels = self.work.plan.passes[p].threads == "pixel"
-            weight = (np.bincount(np.arange(len(lanes)) // ws, weights=self.depth[lanes], minlength=n) if pixels
-                      else np.arange(n))
-            certain = int(np.searchsorted(lanes, self.deepest)) // ws if pixels and self.deepest in lanes else -1
+            if pixels:
+                weight = np.bincount(np.arange(len(lanes)) // ws, weights=self.depth[lanes], minlength=n)
+                certain = int(np.searchsorted(lanes, self.deepest)) // ws if self.deepest in lanes else -1
+            else:                      # a thread's rows: its memory operations and compute steps in the pass
+                weight = np.bincount(np.searchsorted(lanes, every) // ws, minlength=n).astype(np.float64)
+                certain = int(weight.argmax()) if n else -1
             self.lanes[p] = lanes, _stratified(weight, np.ones(n, bool), self.share, self.count,
                                                np.random.default_rng([self.seed, p]), certain)
         return self.lanes[p]
