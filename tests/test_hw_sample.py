@@ -31,7 +31,7 @@ def test_t_quantile_is_students(dof, quantile):
 @pytest.mark.parametrize("scheme, params", [("kbuffer", {"k": 8}), ("freepipe-abuffer", {}), ("linked-list", {}),
                                             ("depth-peeling", {})])
 def test_a_fraction_of_one_is_the_full_level_with_a_zero_width_interval(spheres, scheme, params):
-    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    gpu = load_gpu("gtx280", ["runner.workers=1", "sample.min_tiles=1"])
     whole = load_gpu("gtx280", ["runner.workers=1", "sample.fraction=1"])
     full = replay(spheres, scheme, params, "full", gpu)[1]["timing"]
     sampled = replay(spheres, scheme, params, "sampled", whole)[1]["timing"]
@@ -104,7 +104,7 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     save_trace(spheres, path)
     assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled"]) == 0
     text = capsys.readouterr().out
-    assert "95% CI" in text and "replicates of 1 SM each" in text
+    assert "95% CI" in text and "replicates of 15 SMs each, 30 of 60 tiles" in text
 
 
 def test_a_long_sampled_hold_is_waiting_not_a_deadlock():
@@ -156,7 +156,8 @@ def test_a_sample_that_keeps_all_the_work_runs_on_the_whole_gpu(scheme):
 
 
 def test_a_sample_of_its_share_of_the_work_runs_on_its_share_of_the_sms(spheres):
-    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    # (one tile at least a replicate: the 1-SM design on this small scene)
+    gpu = load_gpu("gtx280", ["runner.workers=1", "sample.min_tiles=1"])
     rec = replay(spheres, "freepipe-abuffer", {}, "sampled", gpu)[1]["timing"]
     assert set(rec["sample"]["replicate_sms"]) <= {sampled_sms(gpu), sampled_sms(gpu) + 1}
 
@@ -183,7 +184,7 @@ def test_a_triangle_sample_finds_the_lines_other_triangles_brought_in(spheres):
     # blocks, so the sample's first touch of a line is mostly not the run's. With the L2 warm where the run's
     # other triangles bring a line in, and holding the sample's share of the run's lines, the misses scale to
     # the full level's (1.02x here; without the correction 2.3x) and the cycles come closer (0.95x; 1.17x)
-    gpu = load_gpu("laptop-ampere", ["runner.workers=1"])
+    gpu = load_gpu("laptop-ampere", ["runner.workers=1", "sample.min_tiles=1"])
     full = replay(spheres, "freepipe-abuffer", {}, "full", gpu)[1]["timing"]
     sampled = replay(spheres, "freepipe-abuffer", {}, "sampled", gpu)[1]["timing"]
     assert sampled["units"]["l2"]["misses"] == pytest.approx(full["units"]["l2"]["misses"], rel=0.2)
@@ -195,7 +196,7 @@ def test_the_heaviest_warp_of_a_pass_is_in_every_replicate(spheres):
     # Ranked by their operations, that warp is in every replicate and the others in one at most; the sampled
     # cycles then come within 3% of the full level's (2.1% here; 10.2% short when warps were ranked by
     # position, none certain)
-    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    gpu = load_gpu("gtx280", ["runner.workers=1", "sample.min_tiles=1"])
     result, _, _ = run_functional(spheres, "lucidraster", {})
     work = Workload.of(result, spheres)
     reps = Replicates(work, gpu, sampled_sms(gpu) / gpu.core.sms)
@@ -210,3 +211,21 @@ def test_the_heaviest_warp_of_a_pass_is_in_every_replicate(spheres):
     full = replay(spheres, "lucidraster", {}, "full", gpu)[1]["timing"]
     sampled = replay(spheres, "lucidraster", {}, "sampled", gpu)[1]["timing"]
     assert sampled["cycles"] == pytest.approx(full["cycles"], rel=0.03)
+
+
+def test_a_small_run_samples_at_least_min_tiles_and_the_smallest_is_the_run(spheres):
+    # nested spheres at 64x64 cover 60 tiles of 8x8: 1 SM of 30 would sample 2 of them, so a replicate runs on
+    # ceil(30 x 30 / 60) = 15 SMs and samples 30; with min_tiles at the run's 60 tiles or more every replicate
+    # is the run, the full level's cycles exactly
+    from gpusim.hw.sample import occupied_tiles
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    result, _, _ = run_functional(spheres, "kbuffer", {"k": 8})
+    tiles = occupied_tiles(Workload.of(result, spheres), gpu)
+    assert tiles == 60 and sampled_sms(gpu) == 1 and sampled_sms(gpu, tiles) == 15
+    rec = replay(spheres, "kbuffer", {"k": 8}, "sampled", gpu)[1]["timing"]["sample"]
+    assert rec["sms"] == 15 and rec["tiles_per_replicate"] >= 30 and rec["min_tiles"] == 30
+    full = replay(spheres, "kbuffer", {"k": 8}, "full", gpu)[1]["timing"]
+    run = load_gpu("gtx280", ["runner.workers=1", f"sample.min_tiles={tiles}"])
+    whole = replay(spheres, "kbuffer", {"k": 8}, "sampled", run)[1]["timing"]
+    assert whole["sample"]["sms"] == gpu.core.sms and whole["cycles"] == full["cycles"]
+    assert whole["cycles_ci95_low"] == whole["cycles_ci95_high"] == full["cycles"]
