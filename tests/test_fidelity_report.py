@@ -151,6 +151,16 @@ def test_the_ci_corpus_reports_each_sampled_runs_interval(corpus):
     errors = fidelity_errors(with_labels(report.results))
     inside = int(errors["inside"].dropna().astype(bool).sum())
     assert f"inside the sampled run's 95% interval in {inside} of {len(sampled)} cases" in text
+    # the CI scenes lie in at most 16 tiles: every sampled run is the run itself (sample.min_tiles), said so
+    assert f"{len(sampled)} of the {len(sampled)} sampled runs simulated the whole run, once" in text
+    assert (sampled["cycles"].to_numpy() == results.loc[results["fidelity"] == "full", "cycles"].to_numpy()).all()
+
+
+def test_whole_sampled_runs_are_those_of_a_share_of_one():
+    from gpusim.report.tables import whole_samples
+    stats = _stats()
+    stats.loc[(stats["run"] == "small-zbuffer-sampled") & (stats["stat"] == "share"), "value"] = 1.0
+    assert whole_samples(stats) == {"small-zbuffer-sampled"}
 
 
 def test_committed_fidelity_report_matches_the_experiment():

@@ -104,7 +104,10 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     save_trace(spheres, path)
     assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled"]) == 0
     text = capsys.readouterr().out
-    assert "95% CI" in text and "replicates of 15 SMs each, 30 of 60 tiles" in text
+    assert "95% CI" in text and "the whole run, simulated once: its 60 tiles are too few" in text
+    assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled",
+                 "--gpu-set", "sample.min_tiles=1"]) == 0
+    assert "from 4 replicates of 1 SM each, 2 of 60 tiles" in capsys.readouterr().out
 
 
 def test_a_long_sampled_hold_is_waiting_not_a_deadlock():
@@ -214,18 +217,22 @@ def test_the_heaviest_warp_of_a_pass_is_in_every_replicate(spheres):
 
 
 def test_a_small_run_samples_at_least_min_tiles_and_the_smallest_is_the_run(spheres):
-    # nested spheres at 64x64 cover 60 tiles of 8x8: 1 SM of 30 would sample 2 of them, so a replicate runs on
-    # ceil(30 x 30 / 60) = 15 SMs and samples 30; with min_tiles at the run's 60 tiles or more every replicate
-    # is the run, the full level's cycles exactly
+    # gtx280: a replicate on 1 of the 30 SMs samples a thirtieth of the tiles; on fewer than 900 tiles that is
+    # under min_tiles = 30, so it runs on ceil(30 x 30 / tiles) SMs, until the 4 replicates would take the 30
+    # SMs between them (about 128 tiles): then the run itself, once
     from gpusim.hw.sample import occupied_tiles
     gpu = load_gpu("gtx280", ["runner.workers=1"])
+    assert [sampled_sms(gpu, t) for t in (2304, 900, 899, 256, 129, 128, 60, 1)] == [1, 1, 2, 4, 7, 30, 30, 30]
+    assert sampled_sms(gpu) == 1
+    # nested spheres at 64x64 cover 60 tiles of 8x8: the run itself, the full level's figures exactly
     result, _, _ = run_functional(spheres, "kbuffer", {"k": 8})
     tiles = occupied_tiles(Workload.of(result, spheres), gpu)
-    assert tiles == 60 and sampled_sms(gpu) == 1 and sampled_sms(gpu, tiles) == 15
-    rec = replay(spheres, "kbuffer", {"k": 8}, "sampled", gpu)[1]["timing"]["sample"]
-    assert rec["sms"] == 15 and rec["tiles_per_replicate"] >= 30 and rec["min_tiles"] == 30
+    assert tiles == 60
     full = replay(spheres, "kbuffer", {"k": 8}, "full", gpu)[1]["timing"]
-    run = load_gpu("gtx280", ["runner.workers=1", f"sample.min_tiles={tiles}"])
-    whole = replay(spheres, "kbuffer", {"k": 8}, "sampled", run)[1]["timing"]
-    assert whole["sample"]["sms"] == gpu.core.sms and whole["cycles"] == full["cycles"]
-    assert whole["cycles_ci95_low"] == whole["cycles_ci95_high"] == full["cycles"]
+    whole = replay(spheres, "kbuffer", {"k": 8}, "sampled", gpu)[1]["timing"]
+    assert whole["sample"]["sms"] == gpu.core.sms and whole["sample"]["min_tiles"] == 30
+    assert whole["cycles"] == full["cycles"] and whole["cycles_ci95_low"] == whole["cycles_ci95_high"]
+    # with min_tiles = 10 a replicate runs on ceil(10 x 30 / 60) = 5 SMs and samples 10 of the 60 tiles
+    part = replay(spheres, "kbuffer", {"k": 8}, "sampled", load_gpu("gtx280", ["runner.workers=1",
+                                                                              "sample.min_tiles=10"]))[1]["timing"]
+    assert part["sample"]["sms"] == 5 and part["sample"]["tiles_per_replicate"] == 10

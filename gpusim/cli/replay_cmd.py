@@ -143,7 +143,12 @@ def _timing_text(t: dict, add) -> None:
         return
     add(f"cycles       {t['cycles']:,} ({t['fidelity']} on {t['gpu']}: {t['microseconds']:,.1f} us; "
         f"{counted(t['instructions'], 'warp instruction')}, {t['wall_seconds']:.2f} s)")
-    if "cycles_ci95_low" in t:
+    if "cycles_ci95_low" in t and t["sample"]["share"] >= 1:
+        s = t["sample"]
+        add(f"  95% CI     {t['cycles_ci95_low']:,} to {t['cycles_ci95_high']:,} cycles (the whole run, simulated "
+            f"once: its {counted(s['tiles'], 'tile')} are too few for {s['replicates']} replicates of at least "
+            f"sample.min_tiles = {s['min_tiles']} to cost less)")
+    elif "cycles_ci95_low" in t:
         s = t["sample"]
         add(f"  95% CI     {t['cycles_ci95_low']:,} to {t['cycles_ci95_high']:,} cycles (error estimate "
             f"{t['cycle_error_estimate']:.1%}: standard error over the cycles, from "

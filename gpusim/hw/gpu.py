@@ -65,8 +65,9 @@ class SampleConfig:
                             "of freedom); the level costs about replicates x fraction of the full level", min=2,
                             max=64)
     min_tiles: int = param(30, unit="tiles", doc="screen tiles with fragments a replicate samples at least: a run "
-                           "with fewer than fraction x this many samples a larger share, on as many more SMs (all of "
-                           "them, the run itself, for a run of at most this many tiles)", min=1)
+                           "with fewer than this many / fraction samples a larger share, on as many more SMs (all of "
+                           "them, the run itself, for a run of at most replicates x this many tiles, where the "
+                           "replicates would cost as much as the run)", min=1)
     seed: int = param(1, doc="random seed of the samples", min=0)
 
 

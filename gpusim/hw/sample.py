@@ -5,8 +5,10 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
 * The machine. A replicate runs ``m = max(1, round(sample.fraction x core.sms))``
   SMs, or on a run whose fragments lie in ``T`` screen tiles fewer than
   ``sample.min_tiles / (m / core.sms)``, enough SMs to sample ``min_tiles`` of
-  them (``ceil(min_tiles x core.sms / T)``; all of them, the run itself, when
-  ``T <= min_tiles``): a smaller sample is too coarse to stand for the run (on
+  them (``ceil(min_tiles x core.sms / T)``; all of them, the run itself,
+  when the replicates would then take at least the run's SMs between them,
+  ``T <= replicates x min_tiles``): a smaller sample is too coarse to stand
+  for the run (on
   the fidelity corpus a replicate of fewer than 5 tiles missed the full level
   by over 5% in 31% of cases, one of 30 or more in 2%). That is a share
   ``s = m / core.sms`` of the GPU, on a share ``s`` of the work (a
@@ -116,11 +118,14 @@ def t_quantile(p: float, dof: int) -> float:
 def sampled_sms(gpu, tiles: int | None = None) -> int:
     """SMs a replicate of the sampled level simulates: ``sample.fraction`` of the GPU's, rounded (at least one),
     or, on a run whose fragments lie in ``tiles`` screen tiles, enough for the replicate to sample
-    ``sample.min_tiles`` of them (all the SMs when the run has no more)."""
+    ``sample.min_tiles`` of them; all the SMs (the run itself, once) where the replicates would then cost
+    as much as the run, on at most ``replicates x min_tiles`` tiles."""
     c, sms = gpu.sample, gpu.core.sms
     m = max(1, min(sms, round(c.fraction * sms)))
     if tiles is not None and m * tiles < c.min_tiles * sms:
-        m = sms if tiles <= c.min_tiles else min(sms, -(-c.min_tiles * sms // tiles))
+        m = min(sms, -(-c.min_tiles * sms // max(tiles, 1)))
+        if m * c.replicates >= sms:      # the replicates would cost at least the run: the run itself
+            m = sms
     return m
 
 

@@ -24,7 +24,7 @@ from gpusim.report.tables import (CASE_ERROR_BOUND, FAST_CASE_FRAGMENTS, MISORDE
                                   drop_cases, drop_summary, error_percentiles, fast_cases, fidelity_errors,
                                   fidelity_misses, fidelity_summary, fidelity_targets, fmt, markdown, most_faithful,
                                   one_per_functional, per_fragment, scene_sweeps, structure_table, unit_utilisation,
-                                  with_labels)
+                                  whole_samples, with_labels)
 from gpusim.text import counted
 
 IMAGES_PER_FIGURE = 11
@@ -289,6 +289,19 @@ class _Report:
                      f"cycles) is {fmt(sampled['error_estimate'].median(), 'share')} against a median |cycle "
                      f"error| of {fmt(sampled['cycle_error'].abs().median(), 'share')}: where the error is larger "
                      "than the interval, it is the scaled-down machine's bias, which the replicates share.", "")
+            whole = sampled["run"].isin(whole_samples(self.stats))
+            if whole.any():
+                rest = sampled[~whole]
+                self.add(f"{int(whole.sum())} of the {len(sampled)} sampled runs simulated the whole run, once (their "
+                         "fragments lie in too few screen tiles for `sample.replicates` replicates of "
+                         "`sample.min_tiles` tiles each to cost less than the run): the full level's cycles exactly, "
+                         "at about its wall time."
+                         + (f" Over the {len(rest)} that sampled, the median |cycle error| is "
+                            f"{fmt(rest['cycle_error'].abs().median(), 'share')}, "
+                            f"{fmt((rest['cycle_error'].abs() <= CASE_ERROR_BOUND['sampled']).mean(), 'share')} "
+                            f"are within {CASE_ERROR_BOUND['sampled']:.0%}, and the interval holds the full level's "
+                            f"cycles in {fmt(rest['inside'].astype(float).mean(), 'share')}." if len(rest) else ""),
+                         "")
         hazards = errors[errors["full_hazards"] > 0]
         self.add("#### RMW hazards and busy cycles per unit", "")
         if len(hazards):

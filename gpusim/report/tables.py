@@ -225,6 +225,12 @@ def sample_sizes(stats: pd.DataFrame) -> dict[str, str]:
     return out
 
 
+def whole_samples(stats: pd.DataFrame) -> set[str]:
+    """The sampled runs that simulated the whole run (a share of 1: too few tiles for a smaller sample)."""
+    sel = stats[(stats["unit"] == "sample") & (stats["stat"] == "share")]
+    return set(sel.loc[sel["value"] >= 1, "run"])
+
+
 def fidelity_misses(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFrame:
     """The cases that miss their level's error target (|cycle error| over :data:`CASE_ERROR_BOUND`) or, for a
     sampled run, whose 95% interval leaves out the full level's cycles; with what decided the case: the
