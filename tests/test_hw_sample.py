@@ -220,14 +220,14 @@ def test_a_small_run_samples_at_least_min_tiles_and_the_smallest_is_the_run(sphe
     # gtx280: a replicate on 1 of the 30 SMs samples a thirtieth of the tiles; on fewer than 900 tiles that is
     # under min_tiles = 30, so it runs on ceil(30 x 30 / tiles) SMs, until the 4 replicates would take the 30
     # SMs between them (about 128 tiles): then the run itself, once
-    from gpusim.hw.sample import occupied_tiles
     gpu = load_gpu("gtx280", ["runner.workers=1"])
     assert [sampled_sms(gpu, t) for t in (2304, 900, 899, 256, 129, 128, 60, 1)] == [1, 1, 2, 4, 7, 30, 30, 30]
     assert sampled_sms(gpu) == 1
     # nested spheres at 64x64 cover 60 tiles of 8x8: the run itself, the full level's figures exactly
     result, _, _ = run_functional(spheres, "kbuffer", {"k": 8})
-    tiles = occupied_tiles(Workload.of(result, spheres), gpu)
-    assert tiles == 60
+    reps = Replicates(Workload.of(result, spheres), gpu)
+    tiles = reps.info["tiles"]
+    assert tiles == 60 and reps.sms == gpu.core.sms and reps.share == 1
     full = replay(spheres, "kbuffer", {"k": 8}, "full", gpu)[1]["timing"]
     whole = replay(spheres, "kbuffer", {"k": 8}, "sampled", gpu)[1]["timing"]
     assert whole["sample"]["sms"] == gpu.core.sms and whole["sample"]["min_tiles"] == 30

@@ -141,17 +141,6 @@ def replicate_sms(gpu, program: Program, floor: int) -> int:
     return max(floor, min(gpu.core.sms, round(kept / total * gpu.core.sms)))
 
 
-def tile_index(pixel, width: int, tile: int):
-    """The screen tile (``tile`` pixels square, numbered row by row) of each pixel of a ``width``-wide screen."""
-    return (pixel // width // tile) * -(-width // tile) + (pixel % width) // tile
-
-
-def occupied_tiles(work: Workload, gpu) -> int:
-    """Screen tiles (``sample.tile`` pixels square) holding at least one fragment of ``work``."""
-    pixel = work.frag_pixel
-    return len(_distinct(tile_index(pixel, work.width, gpu.sample.tile))) if len(pixel) else 0
-
-
 def scaled_gpu(gpu, sms: int, lines: float | None = None):
     """``gpu`` cut down to ``sms`` of its SMs: the quad rasterizer's rate and the scoreboard's cells in the same
     share, the L2 slices' lines in the share ``lines`` (default the same; a sample holds that share of the run's
@@ -223,9 +212,11 @@ def _stratified(weight: np.ndarray, present: np.ndarray, share: float, replicate
 class Replicates:
     """The sampling units of a run and the replicates' choice of them (see the module docstring)."""
 
-    def __init__(self, work: Workload, gpu, share: float):
+    def __init__(self, work: Workload, gpu, share: float | None = None):
+        """``share``: of the GPU and the work each replicate takes; by default the SMs :func:`sampled_sms` gives
+        for the tiles the run's fragments lie in (``sms``)."""
         c, ws = gpu.sample, gpu.core.warp_size
-        self.work, self.gpu, self.share, self.count, self.seed = work, gpu, share, c.replicates, c.seed
+        self.work, self.gpu, self.count, self.seed = work, gpu, c.replicates, c.seed
         self.tiles_x = -(-work.width // c.tile)
         rng = np.random.default_rng(c.seed)
         pixel, prims = work.frag_pixel, work.frag_prim
@@ -233,7 +224,13 @@ class Replicates:
         # the deepest pixel's tile and the largest triangle's block are in every replicate: the longest chains of
         # dependent operations (a pixel's list, a triangle thread's loop) decide a latency-bound pass
         self.deepest = int(self.depth.argmax()) if len(pixel) else -1
-        frag_tiles = np.bincount(self.tile_of(pixel), minlength=self.tiles_x * -(-work.height // c.tile))
+        self.frag_tile = self.tile_of(pixel)
+        frag_tiles = np.bincount(self.frag_tile, minlength=self.tiles_x * -(-work.height // c.tile))
+        occupied = int((frag_tiles > 0).sum())
+        if share is None:
+            self.sms = sampled_sms(gpu, occupied)
+            share = self.sms / gpu.core.sms
+        self.share = share
         self.tiles = _stratified(frag_tiles, frag_tiles > 0, share, self.count, rng,
                                  int(self.tile_of(self.deepest)) if len(pixel) else -1)
         triangles = max(work.triangles, int(prims.max()) + 1 if len(prims) else 0)
@@ -243,13 +240,13 @@ class Replicates:
                                                  minlength=blocks), np.ones(blocks, bool), share, self.count, rng,
                                      int(per_triangle.argmax()) // ws if len(prims) else -1)
         self.lanes: dict[int, tuple] = {}        # pass -> its lanes and the replicates' choice of their warps
-        self.frag_tile = self.tile_of(pixel)
         self.units: dict[int, list] = {}         # pass -> the sampling unit of each thread of each group
-        self.info = {"tiles": int((frag_tiles > 0).sum()), "tiles_per_replicate": int(self.tiles[0].sum()),
+        self.info = {"tiles": occupied, "tiles_per_replicate": int(self.tiles[0].sum()),
                      "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
 
     def tile_of(self, pixel):
-        return tile_index(pixel, self.work.width, self.gpu.sample.tile)
+        tile = self.gpu.sample.tile
+        return (pixel // self.work.width // tile) * self.tiles_x + (pixel % self.work.width) // tile
 
     def units_of(self, p: int, threads: list[np.ndarray], mapping: str) -> list[np.ndarray]:
         """The sampling unit of each thread of each group of pass ``p`` (the same for every replicate)."""
@@ -388,10 +385,9 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
 def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict, None]:
     """The sampled level on ``work``: (record, None); see the module docstring."""
     start = time.perf_counter()
-    sms = sampled_sms(gpu, occupied_tiles(work, gpu))
-    share = sms / gpu.core.sms
+    reps = Replicates(work, gpu)
+    sms, share = reps.sms, reps.share
     small = scaled_gpu(gpu, sms)
-    reps = Replicates(work, gpu, share)
     front = per_triangle_cycles(gpu)
     check_operations(work.plan, gpu)         # before the pieces, which hold every operation of the run
     rmw_all = rmw_threads(work.plan, work)

@@ -281,9 +281,8 @@ def add_rmw(plan: OpPlan, pass_index: int, threads, pix: np.ndarray, pixel_count
 
     fb = lambda i, s: pix[i] * FRAMEBUFFER_BYTES  # noqa: E731
     if hw == "blender":
-        record = slots * slot_bytes
-        plan.add(pass_index, "program_blend", "kbuffer", threads, count, lambda i, s: pix[i] * record, record,
-                 seq_pass=seq_pass)
+        plan.add(pass_index, "program_blend", "kbuffer", threads, count, lambda i, s: at(i, 0), slots * slot_bytes,
+                 seq_pass=seq_pass)      # the record from its first entry on
         if framebuffer:                  # the colour the program emits, blended into the target
             plan.add(pass_index, "blend", "framebuffer", threads, count, fb, FRAMEBUFFER_BYTES, seq_pass=seq_pass)
         return

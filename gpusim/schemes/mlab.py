@@ -173,15 +173,15 @@ class MultiLayerAlphaBlending(Scheme):
         plan = OpPlan(passes, ["layers"])
         plan.add(0, "store", "layers", P * L, 1, lambda i, s: i * entry, entry)
         layout = record_layout(self.hw)
+        entry_at = lambda i, s: entry_index(pix[frags[i]], s, L, P, layout) * entry  # noqa: E731
         plan.compute(1, frags, MLAB_FRAGMENT, dep=False)
         if self.hw == "blender":               # the program on the pixel's record: its L entries adjacent
-            plan.add(1, "program_blend", "layers", frags, 1, lambda i, s: pix[frags[i]] * (L * entry), L * entry)
+            plan.add(1, "program_blend", "layers", frags, 1, lambda i, s: entry_at(i, 0), L * entry)
         else:
-            at = lambda i, s: entry_index(pix[frags[i]], s, L, P, layout) * entry  # noqa: E731
             plan.add(1, "scoreboard", "layers", frags, 1, lambda i, s: pix[frags[i]] * entry, 0)
-            plan.add(1, "rmw_read", "layers", frags, L, at, entry, dep=True)
+            plan.add(1, "rmw_read", "layers", frags, L, entry_at, entry, dep=True)
             plan.compute(1, frags, L * compare_exchange(cb) + MLAB_MERGE)
-            plan.add(1, "rmw_write", "layers", frags, L, at, entry, dep=True)
+            plan.add(1, "rmw_write", "layers", frags, L, entry_at, entry, dep=True)
         pixels = P
         plan.add(2, "load", "layers", pixels, L, lambda i, s: entry_index(i, s, L, P, layout) * entry, entry)
         plan.compute(2, pixels, occupied * COMPOSITE)
