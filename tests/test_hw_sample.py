@@ -125,9 +125,10 @@ def test_a_long_sampled_hold_is_waiting_not_a_deadlock():
 
 
 def test_a_sampled_run_over_max_operations_refuses_before_building_anything(monkeypatch):
-    """The sampled level lowers every operation before it samples: a run over ``runner.max_operations`` must
-    be refused in one line before the pieces holding them all are built (stress-layers' depth peeling, 420M
-    operations, ran out of memory there)."""
+    """The sampled level lowers every operation of a chunk of passes before it samples: a run over
+    ``runner.max_operations`` that the full level could not stream either (a pass over the limit; more
+    operations per fragment than it streams) must be refused in one line before the pieces holding them are
+    built (stress-layers' depth peeling, 420M operations, ran out of memory there)."""
     from gpusim.errors import GpusimError
     from gpusim.hw import sample
     from gpusim.replay import run_timing
@@ -138,7 +139,8 @@ def test_a_sampled_run_over_max_operations_refuses_before_building_anything(monk
     trace = trace_scene(*load_scene("default", ["screen.width=32", "screen.height=32"]), progress=False)
     result, _, reference = run_functional(trace, "depth-peeling", {})
     gpu = load_gpu("gtx280", ["runner.workers=1", "runner.max_operations=1000"])
-    with pytest.raises(GpusimError, match=r"^the run would lower [\d,]+ operations.*--fidelity analytic") as e:
+    with pytest.raises(GpusimError, match=r"would lower [\d,]+ operations, over runner.max_operations.*"
+                                          r"--fidelity analytic") as e:
         run_timing(result, trace, "sampled", gpu, reference)
     assert "\n" not in str(e.value)
 

@@ -100,3 +100,30 @@ def test_a_run_whose_operations_grow_with_passes_is_refused():
     gpu = load_gpu("gtx280", [f"runner.max_operations={int(pass_operations(result.plan).max())}"])
     with pytest.raises(GpusimError, match="per fragment, too many to replay a chunk of passes at a time"):
         FIDELITIES["full"](result, trace, gpu)
+
+
+@pytest.mark.parametrize("scheme, params", [
+    ("freepipe-abuffer", {}),                         # triangle blocks, atomics
+    ("depth-peeling", {}),                            # seq_pass groups over 20 peels
+    ("dual-depth-peeling", {}),
+    ("kbuffer", {"k": 8}),                            # RMW hazards in the replicates
+    ("kbuffer", {"k": 8, "order": "centroid", "batch": 16}),   # a pass per batch, flush passes
+])
+def test_a_sampled_run_over_max_operations_is_sampled_a_chunk_at_a_time(small, scheme, params):
+    """The sampled level takes what the full level streams: each replicate's sample of each chunk of passes,
+    on a machine of its own (of the SMs its sample of the whole run takes), gives the figures of its sample
+    of the whole run."""
+    result = make_scheme(scheme, params).run(small)
+    reference = composite_exact(small)
+    out = []
+    for limit in (10**9, limit_for(result, small, 0.3), limit_for(result, small, 0.0)):
+        gpu = load_gpu("gtx280", ["runner.workers=1", f"runner.max_operations={limit}", "sample.min_tiles=1"])
+        rec, _ = FIDELITIES["sampled"](result, small, gpu, reference)
+        rec.pop("event_seconds")
+        streamed = rec.pop("streamed", None)
+        assert (streamed is None) == (limit == 10**9)
+        if streamed is not None:
+            assert streamed["chunks"] > 1
+        out.append(rec)
+    assert out[0] == out[1] == out[2]
+    assert out[0]["sample"]["share"] < 1 and out[0]["cycles_ci95_low"] < out[0]["cycles_ci95_high"]

@@ -61,7 +61,10 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   work it kept (RMW fragments for hazards, operations for the units), averaged.
 
 A fraction of 1 makes the machine the GPU and every replicate the whole run:
-the full level's figures, and an interval of zero width.
+the full level's figures, and an interval of zero width. A run over
+``runner.max_operations`` is sampled a chunk of passes at a time, the chunks the
+full level streams (gpusim.hw.stream), each replicate on the SMs its sample of
+the whole run takes: the figures of the run lowered at once.
 """
 
 from __future__ import annotations
@@ -72,12 +75,14 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import INDEX_BASE, Workload, check_operations, hash32, lower, plan_pieces, thread_mapping
+from gpusim.errors import GpusimError
+from gpusim.hw.lower import INDEX_BASE, Workload, hash32, lower, plan_pieces, sample_masks, thread_mapping
 from gpusim.hw.memory import MEMORY_OPS
 from gpusim.hw.memory.l2 import line_keys
 from gpusim.hw.program import Program
 from gpusim.hw.raster import per_triangle_cycles
 from gpusim.hw.rop import framebuffer_operations
+from gpusim.hw.stream import ADVICE, StreamedRun, plan_chunks
 from gpusim.opplan import OPS
 
 #: unit figures that add up over the work (a sample's are scaled up by its share); the others are kept as they are
@@ -134,8 +139,12 @@ def replicate_sms(gpu, program: Program, floor: int) -> int:
     GPU's SMs, at least ``floor`` (a sample that keeps more of the work than its share of the tiles, as one
     of a trace whose fragments lie in fewer tiles than the sample has strata, runs on as much more of the GPU;
     all of it, the run itself)."""
-    kept = sum(p.operations for p in program.passes)
-    total = sum(p.operations_total for p in program.passes)
+    return fitted_sms(gpu, sum(p.operations for p in program.passes), sum(p.operations_total for p in program.passes),
+                      floor)
+
+
+def fitted_sms(gpu, kept: int, total: int, floor: int) -> int:
+    """:func:`replicate_sms` of a sample that keeps ``kept`` of the run's ``total`` operations."""
     if not total:
         return floor
     return max(floor, min(gpu.core.sms, round(kept / total * gpu.core.sms)))
@@ -325,11 +334,12 @@ def _distinct(values: np.ndarray) -> np.ndarray:
 
 
 def rmw_threads(source, work: Workload) -> tuple[int, int]:
-    """Fragment threads with an ``rmw_read``, and their pixels: of an OpPlan, or of a lowered (sampled)
-    Program."""
-    if isinstance(source, Program):
-        rows = source.rows_of("coalescer")
-        threads = rows.thread[rows.op == OPS.index("rmw_read")] if len(rows) else np.zeros(0, np.int64)
+    """Fragment threads with an ``rmw_read``, and their pixels: of an OpPlan, of a lowered (sampled)
+    Program, or the ids of such threads (the chunks' of a run sampled a chunk of passes at a time)."""
+    if isinstance(source, np.ndarray):
+        threads = source
+    elif isinstance(source, Program):
+        threads = _rmw_readers(source)
     else:
         parts = [g.thread_ids() for g in source.groups if g.op == "rmw_read"]
         threads = np.concatenate(parts) if parts else np.zeros(0, np.int64)
@@ -337,26 +347,55 @@ def rmw_threads(source, work: Workload) -> tuple[int, int]:
     return len(threads), len(_distinct(work.frag_pixel[threads])) if len(threads) else 0
 
 
-def _replicate(work: Workload, small, program: Program, rmw_all: tuple[int, int]) -> dict:
-    """One replicate's figures, each scaled up to the whole run."""
-    from gpusim.hw.timing import run_full
-    rec, _ = run_full(work, small, program=program)
-    kept = sum(p.operations for p in program.passes)
-    total = sum(p.operations_total for p in program.passes)
+def _rmw_readers(program: Program) -> np.ndarray:
+    """The threads of a lowered program's ``rmw_read`` rows."""
+    rows = program.rows_of("coalescer")
+    return rows.thread[rows.op == OPS.index("rmw_read")] if len(rows) else np.zeros(0, np.int64)
+
+
+def _replicate(work: Workload, rec: dict, passes: list[tuple[int, int]], rmw_kept: tuple[int, int],
+               rmw_all: tuple[int, int]) -> dict:
+    """One replicate's figures, each scaled up to the whole run: from the event model's record ``rec`` of its
+    sample, each pass's (operations kept, operations of the run) ``passes`` and the RMW threads (and pixels)
+    it kept, ``rmw_kept``, of the run's ``rmw_all``."""
+    kept = sum(k for k, _ in passes)
+    total = sum(t for _, t in passes)
     w = kept / total if total else 1.0
     out = {"cycles": [p["cycles"] for p in rec["passes"]], "instructions": rec["instructions"] / w,
-           "warps": [p["warps"] * (pp.operations_total / pp.operations if pp.operations else 1)
-                     for p, pp in zip(rec["passes"], program.passes)],
+           "warps": [p["warps"] * (t / k if k else 1) for p, (k, t) in zip(rec["passes"], passes)],
            "operations_sampled": kept, "operations": total, "units_built": rec["units_built"], "units": {}}
     for name, u in rec["units"].items():
         scale = 1.0 if name == "raster" else 1 / w    # the front end takes every triangle
         out["units"][name] = {k: v * scale if k in ADDITIVE else v for k, v in u.items()}
         if "run_busy_cycles" in u:                    # a shared unit: the run's busy cycles, from its load
             out["units"][name]["busy_cycles"] = out["units"][name].pop("run_busy_cycles")
-    rmw_kept = rmw_threads(program, work)
     for key, every, mine in zip(("rmw_hazards", "rmw_hazard_pixels"), rmw_all, rmw_kept):
         out[key] = min(every, rec.get(key, 0) * every / mine) if mine else 0
     return out
+
+
+def _replicate_program(work: Workload, gpu, reps: Replicates, r: int, pieces, passes=None, every_lines=None,
+                       front=None, sms: int | None = None):
+    """Replicate ``r``'s sample of the run (of its passes ``passes``, from ``pieces``), lowered for the share
+    of the GPU it takes (``sms`` where it is known): (the machine's GPU, the program)."""
+    keep = Keep(reps, r)
+    mine = reps.sms if sms is None else sms
+    machine = scaled_gpu(gpu, mine)
+    program = lower(work, machine, keep, passes=passes, pieces=pieces)
+    fit = mine if sms is not None else replicate_sms(gpu, program, reps.sms)    # the share the kept work takes
+    if fit != mine:
+        mine, machine = fit, scaled_gpu(gpu, fit)
+        program = lower(work, machine, keep, passes=passes, pieces=pieces)
+    warm = None
+    if every_lines is not None:          # the L2 holds the sample's share of the run's lines, warm where others
+        kept = line_touches(gpu, memory_path_addresses(          # bring a line in before the sample does
+            gpu, [(OPS[op], a) for u in program.row_sets.values() for op, a, _, _ in u.parts]))
+        machine = scaled_gpu(gpu, mine, len(kept[0]) / max(1, len(every_lines[0])))
+        warm = warm_lines(every_lines, kept, gpu.sample.seed + r)
+    program = dataclasses.replace(program, front_end_cycles=front, l2_warm=warm)
+    for pp in program.passes:        # a flush's full-screen quad: each SM its share of the GPU's warps
+        pp.flush_warps = -(-pp.flush_warps // gpu.core.sms) * mine
+    return machine, program
 
 
 def _units(runs: list[dict], gpu, cycles: int) -> dict:
@@ -382,45 +421,76 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
     return out
 
 
+def _chunked_sms(work: Workload, gpu, reps: Replicates, count: int, chunks: list[tuple[int, int]]) -> list[int]:
+    """The SMs of each of the first ``count`` replicates of a run sampled a chunk of passes at a time: as
+    :func:`replicate_sms` gives for its sample of the whole run (one machine size for every chunk, as when the
+    run is lowered at once), from the operations its sample keeps of each chunk's."""
+    kept, total = [0] * count, 0
+    for first, end in chunks:
+        pieces = plan_pieces(work, (first, end))
+        total += sum(pc.operations for pc in pieces)
+        for r in range(count):
+            masks = sample_masks(pieces, Keep(reps, r), first)
+            kept[r] += sum(int(np.count_nonzero(m)) for pc, m in zip(pieces, masks) if pc.instructions is None)
+        del pieces
+    return [fitted_sms(gpu, k, total, reps.sms) for k in kept]
+
+
 def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict, None]:
     """The sampled level on ``work``: (record, None); see the module docstring."""
+    from gpusim.hw.timing import run_full, streamed_record
     start = time.perf_counter()
     reps = Replicates(work, gpu)
     sms, share = reps.sms, reps.share
-    small = scaled_gpu(gpu, sms)
     front = per_triangle_cycles(gpu)
-    check_operations(work.plan, gpu)         # before the pieces, which hold every operation of the run
+    # a run over runner.max_operations is sampled a chunk of passes at a time, as the full level replays it
+    # (refused where the full level refuses it), before the pieces, which hold every operation of a chunk
+    chunks = plan_chunks(work, gpu)
+    if chunks is not None and gpu.l2.size_bytes:
+        raise GpusimError(f"the run would lower {work.plan.total_ops():,} operations, over runner.max_operations "
+                          f"= {gpu.runner.max_operations:,}, and the GPU's L2 carries state from pass to pass, so "
+                          f"it cannot be sampled a chunk of passes at a time; {ADVICE}")
     rmw_all = rmw_threads(work.plan, work)
-    pieces = plan_pieces(work)
+    pieces = plan_pieces(work) if chunks is None else None
     every_lines = None                       # the run's L2 lines and touches of each (gpusim.hw.memory.l2)
     if gpu.l2.size_bytes and share < 1:
         every_lines = line_touches(gpu, memory_path_addresses(
             gpu, [(work.plan.groups[pc.group].op, pc.address) for pc in pieces if pc.instructions is None]))
     runs: list[dict] = []
     machines: list[int] = []
-    for r in range(reps.count):
-        if share >= 1 and runs:              # every replicate is the whole run: the same figures
-            runs.append(runs[0])
-            machines.append(sms)
-            continue
-        keep = Keep(reps, r)
-        mine, machine = sms, small
-        program = lower(work, machine, keep, pieces=pieces)
-        fit = replicate_sms(gpu, program, sms)    # the share of the GPU the kept work takes
-        if fit != mine:
-            mine, machine = fit, scaled_gpu(gpu, fit)
-            program = lower(work, machine, keep, pieces=pieces)
-        warm = None
-        if every_lines is not None:          # the L2 holds the sample's share of the run's lines, warm where others
-            kept = line_touches(gpu, memory_path_addresses(          # bring a line in before the sample does
-                gpu, [(OPS[op], a) for u in program.row_sets.values() for op, a, _, _ in u.parts]))
-            machine = scaled_gpu(gpu, mine, len(kept[0]) / max(1, len(every_lines[0])))
-            warm = warm_lines(every_lines, kept, gpu.sample.seed + r)
-        program = dataclasses.replace(program, front_end_cycles=front, l2_warm=warm)
-        for pp in program.passes:        # a flush's full-screen quad: each SM its share of the GPU's warps
-            pp.flush_warps = -(-pp.flush_warps // gpu.core.sms) * mine
-        runs.append(_replicate(work, machine, program, rmw_all))
-        machines.append(mine)
+    if chunks is None:
+        for r in range(reps.count):
+            if share >= 1 and runs:              # every replicate is the whole run: the same figures
+                runs.append(runs[0])
+                machines.append(sms)
+                continue
+            machine, program = _replicate_program(work, gpu, reps, r, pieces, every_lines=every_lines, front=front)
+            rec, _ = run_full(work, machine, program=program)
+            runs.append(_replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
+                                   rmw_threads(program, work), rmw_all))
+            machines.append(machine.core.sms)
+    else:                                    # a chunk of passes at a time, each replicate's sample of each
+        count = 1 if share >= 1 else reps.count
+        fit = _chunked_sms(work, gpu, reps, count, chunks)
+        streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in range(count)]
+        ops: list[list] = [[] for _ in range(count)]
+        readers: list[list] = [[] for _ in range(count)]
+        for first, end in chunks:
+            pieces = plan_pieces(work, (first, end))
+            for r in range(count):
+                machine, program = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
+                                                      sms=fit[r])
+                streams[r].replay(machine, program, first)
+                ops[r] += [(p.operations, p.operations_total) for p in program.passes]
+                readers[r].append(_rmw_readers(program))
+                del program
+            del pieces
+        for r in range(count):
+            rec, _ = streamed_record(work, gpu, streams[r])
+            runs.append(_replicate(work, rec, ops[r], rmw_threads(np.concatenate(readers[r]), work), rmw_all))
+            machines.append(fit[r])
+        runs += runs[:1] * (reps.count - count)
+        machines += machines[:1] * (reps.count - count)
     n = len(runs)
     per_pass = np.array([run["cycles"] for run in runs], np.float64)       # (replicates, passes)
     totals = per_pass.sum(axis=1)
@@ -443,6 +513,8 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     rec["cycles_ci95_high"] = int(math.ceil(max(cycles, mean + t * se)))
     rec["cycles_std_error"] = se
     rec["cycle_error_estimate"] = se / mean if mean else 0.0
+    if chunks is not None:
+        rec["streamed"] = {"chunks": len(chunks), "passes": [list(c) for c in chunks]}
     rec["sample"] = {"tile": gpu.sample.tile, "fraction": gpu.sample.fraction, "min_tiles": gpu.sample.min_tiles,
                      "seed": gpu.sample.seed,
                      "replicates": n, "sms": sms, "replicate_sms": machines, "share": share, "t_quantile": t,

@@ -99,52 +99,70 @@ def unit_order(gpu) -> list[str]:
     return order
 
 
-def run_streamed(work, gpu, chunks: list[tuple[int, int]], progress=None):
-    """Replay the ``chunks`` of ``work`` (ranges of passes) one after the other; (each pass's (name, kind,
-    cycles, warps), the units holding the run's counts in machine order, instructions, operations, RMW
-    windows or None)."""
-    limit = gpu.runner.max_cycles
-    passes: list[tuple] = []
-    holders: dict[str, object] = {}
-    instructions = operations = 0
-    rmw: list = []                            # each chunk's RMW reads and writes: (pass, thread, cycle)
-    for first, end in chunks:
-        program = lower(work, gpu, passes=(first, end))
+class StreamedRun:
+    """The figures of a run replayed a program of consecutive passes at a time, each on a machine of its own
+    built for it and dropped after it: each pass's cycles, the units' counts, instructions, operations and the
+    RMW operations on the run's timeline. :func:`run_streamed` feeds it the full level's chunks; the sampled
+    level (gpusim.hw.sample) a replicate's sample of each chunk."""
+
+    def __init__(self, work, limit_cycles: int):
+        self.work, self.limit = work, limit_cycles
+        self.passes: list[tuple] = []             # (name, kind, cycles, warps) of each pass so far
+        self.holders: dict[str, object] = {}      # unit name -> the run's counts (detached units, absorbed)
+        self.instructions = self.operations = 0
+        self.rmw: list = []                       # each chunk's RMW reads and writes: (pass, thread, cycle)
+
+    def replay(self, gpu, program, first: int, progress=None) -> None:
+        """Replay ``program`` (the run's passes from ``first`` on) on a machine of ``gpu`` and add its figures;
+        ``progress``: the run's bar (tqdm-like)."""
         bar = _ChunkBar(progress, program.warps) if progress is not None else None
-        machine = Machine(gpu, program, work.width, bar)
+        machine = Machine(gpu, program, self.work.width, bar)
         if machine.carries_state():
-            raise GpusimError(f"the run would lower {work.plan.total_ops():,} operations, over "
+            raise GpusimError(f"the run would lower {self.work.plan.total_ops():,} operations, over "
                               f"runner.max_operations = {gpu.runner.max_operations:,}, and its units carry state "
                               f"from pass to pass (an L2), so it cannot be replayed a chunk of passes at a time; "
                               f"{ADVICE}")
-        start = chunk_start = sum(p[2] for p in passes)
+        start = chunk_start = sum(p[2] for p in self.passes)
         machine.run()
         for pp, c in zip(program.passes, machine.pass_cycles):
-            passes.append((pp.name, pp.kind, c, pp.warps))
-            if start + c > limit:
-                raise GpusimError(f"the run passed runner.max_cycles = {limit:,} cycles before finishing (pass "
-                                  f"{first + pp.index} of {len(work.plan.passes)}); raise --gpu-set "
+            self.passes.append((pp.name, pp.kind, c, pp.warps))
+            if start + c > self.limit:
+                raise GpusimError(f"the run passed runner.max_cycles = {self.limit:,} cycles before finishing "
+                                  f"(pass {first + pp.index} of {len(self.work.plan.passes)}); raise --gpu-set "
                                   f"runner.max_cycles=N or use a smaller trace")
             start += c
-        instructions += program.instructions
-        operations += program.operations
+        self.instructions += program.instructions
+        self.operations += program.operations
         for name, u in machine.units.items():
-            if name in holders:
-                holders[name].absorb(u.detached())
+            if name in self.holders:
+                self.holders[name].absorb(u.detached())
             else:
-                holders[name] = u.detached()
+                self.holders[name] = u.detached()
         ops = rmw_operations(program, machine)
         if ops is not None:                   # on the run's passes and timeline
-            rmw.append([(p + first, thread, at + chunk_start) for p, thread, at in ops])
-        del program, machine, u
+            self.rmw.append([(p + first, thread, at + chunk_start) for p, thread, at in ops])
+        del machine, u
         gc.collect()                          # the units and the machine refer to each other
-    order = unit_order(gpu)
-    units = {name: holders[name] for name in sorted(holders, key=order.index)}
-    windows = None
-    if rmw:
-        reads, writes = ([np.concatenate(col) for col in zip(*(chunk[k] for chunk in rmw))] for k in (0, 1))
-        windows = rmw_windows(reads, writes, len(work.frag_pixel))
-    return passes, units, instructions, operations, windows
+
+    def units(self, gpu) -> dict:
+        """The units holding the run's counts, in machine order."""
+        order = unit_order(gpu)
+        return {name: self.holders[name] for name in sorted(self.holders, key=order.index)}
+
+    def windows(self):
+        """The RMW windows (gpusim.hw.hazards.rmw_windows) of the run, or None without RMW operations."""
+        if not self.rmw:
+            return None
+        reads, writes = ([np.concatenate(col) for col in zip(*(chunk[k] for chunk in self.rmw))] for k in (0, 1))
+        return rmw_windows(reads, writes, len(self.work.frag_pixel))
+
+
+def run_streamed(work, gpu, chunks: list[tuple[int, int]], progress=None):
+    """Replay the ``chunks`` of ``work`` (ranges of passes) one after the other: their figures put together."""
+    run = StreamedRun(work, gpu.runner.max_cycles)
+    for first, end in chunks:
+        run.replay(gpu, lower(work, gpu, passes=(first, end)), first, progress)
+    return run
 
 
 def unit_records(units: dict, total: int) -> tuple[dict, list]:

@@ -26,7 +26,7 @@ from gpusim.hw.lower import Workload, lower
 from gpusim.hw.machine import Machine
 from gpusim.hw.program import Program
 from gpusim.hw.sample import run_sampled
-from gpusim.hw.stream import plan_chunks, run_streamed, unit_records
+from gpusim.hw.stream import StreamedRun, plan_chunks, run_streamed, unit_records
 from gpusim.hw.thesis import thesis_timing
 
 
@@ -89,15 +89,22 @@ def run_full(work: Workload, gpu, result=None, reference=None, program: Program 
 
 def _run_streamed(work: Workload, gpu, chunks, result, reference, progress, start: float):
     """:func:`run_full` a chunk of passes at a time (gpusim.hw.stream); the same record, plus ``streamed``."""
-    passes, units, instructions, operations, windows = run_streamed(work, gpu, chunks, progress)
-    total = sum(p[2] for p in passes)
-    rec = _base(gpu, "full", instructions, operations)
-    rec["passes"] = [{"name": name, "kind": kind, "cycles": c, "warps": warps} for name, kind, c, warps in passes]
-    rec["units_built"] = list(units)
-    rec["units"], rec["unit_stats"] = unit_records(units, total)
-    image = _hazards(rec, windows, work, result, reference)
+    rec, image = streamed_record(work, gpu, run_streamed(work, gpu, chunks, progress), result, reference)
     rec["streamed"] = {"chunks": len(chunks), "passes": [list(c) for c in chunks]}
     rec["event_seconds"] = time.perf_counter() - start
+    return rec, image
+
+
+def streamed_record(work: Workload, gpu, run: StreamedRun, result=None, reference=None) -> tuple[dict, object]:
+    """:func:`run_full`'s record of a run replayed a program at a time (``run``), and the image with its RMW
+    artifacts or None."""
+    total = sum(p[2] for p in run.passes)
+    units = run.units(gpu)
+    rec = _base(gpu, "full", run.instructions, run.operations)
+    rec["passes"] = [{"name": name, "kind": kind, "cycles": c, "warps": warps} for name, kind, c, warps in run.passes]
+    rec["units_built"] = list(units)
+    rec["units"], rec["unit_stats"] = unit_records(units, total)
+    image = _hazards(rec, run.windows(), work, result, reference)
     return _finish(rec, gpu, total), image
 
 

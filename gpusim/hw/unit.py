@@ -79,9 +79,22 @@ def interleave(address, granularity: int, instances: int):
     landing a screen column on each; GPUs hash their partition bits for the same reason. For a fixed
     ``b // n`` the map is a permutation of the ``n`` instances, so :func:`within_instance` numbers each
     instance's share one to one."""
-    b = div(address, granularity)
     if instances == 1:
-        return mod(b, 1)
+        return mod(div(address, granularity), 1)
+    address = np.asarray(address)
+    if address.ndim != 1 or len(address) <= _CHUNK:
+        return _interleave(address, granularity, instances)
+    out = np.empty(len(address), np.result_type(address.dtype, np.int64))
+    for lo in range(0, len(address), _CHUNK):       # temporaries the allocator reuses (and the cache holds)
+        out[lo:lo + _CHUNK] = _interleave(address[lo:lo + _CHUNK], granularity, instances)
+    return out
+
+
+_CHUNK = 1 << 18
+
+
+def _interleave(address, granularity: int, instances: int):
+    b = div(address, granularity)
     q = div(b, instances)
     q2 = div(q, instances)
     return mod(b + q + q2 + div(q2, instances), instances)
@@ -187,16 +200,26 @@ class Unit:
         machine and program behind it (gpusim.hw.stream keeps it after dropping them)."""
         out = object.__new__(type(self))
         out.__dict__.update({a: getattr(self, a) for a in dict.fromkeys((*self.KEPT, *self.TOTALS, *self.COUNTERS))})
+        if self.run_busy_fp is not None:
+            out.run_busy_fp = list(self.run_busy_fp)
         return out
 
     def absorb(self, other: "Unit") -> None:
         """Add what ``other`` counted (this unit, on the machine that replayed other passes of the run):
-        ``TOTALS`` added, ``COUNTERS`` merged as they say."""
+        ``TOTALS`` added, ``COUNTERS`` merged as they say, per instance (a sampled replicate's machines may
+        have different numbers of SMs: the longer list's extra instances counted as they are); a sampled
+        program's :attr:`run_busy_fp` added, the busy sub-cycles standing for it where a machine had none
+        (its sample kept the whole load)."""
+        if self.run_busy_fp is not None or other.run_busy_fp is not None:
+            self.run_busy_fp = _merged(self.busy_fp if self.run_busy_fp is None else self.run_busy_fp,
+                                       other.busy_fp if other.run_busy_fp is None else other.run_busy_fp,
+                                       operator.add)
         for a in dict.fromkeys((*self.TOTALS, *self.COUNTERS)):
             how = self.COUNTERS.get(a, operator.add)
             mine, theirs = getattr(self, a), getattr(other, a)
-            setattr(self, a, [how(x, y) for x, y in zip(mine, theirs)] if isinstance(mine, list)
-                    else how(mine, theirs))
+            setattr(self, a, _merged(mine, theirs, how) if isinstance(mine, list) else how(mine, theirs))
+        if "instances" in self.KEPT:
+            self.instances = max(self.instances, other.instances)
 
     # the interface the core and the machine use
     def serve(self, wi: int, now: int):
@@ -238,6 +261,13 @@ class Unit:
         if free is None:
             return f"{self.name}: -"
         return f"{self.name}: free " + " ".join(f"[{i}]{cycles(f)}" for i, f in enumerate(free[:8]))
+
+
+def _merged(mine: list, theirs: list, how) -> list:
+    """Two per-instance lists merged instance by instance; the longer one's extra instances as they are."""
+    both = [how(x, y) for x, y in zip(mine, theirs)]
+    longer = mine if len(mine) > len(theirs) else theirs
+    return both + list(longer[len(both):])
 
 
 #: name -> unit class (registration order); filled by @register_unit as the unit modules are imported
