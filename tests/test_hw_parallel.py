@@ -103,3 +103,36 @@ def test_max_cycles_guard_names_the_pass_that_crossed_it():
     for workers in (1, 2):
         with pytest.raises(GpusimError, match=r"runner.max_cycles = 10,000 cycles before finishing \(pass 1 of 2\)"):
             simulate(plan, sizes, 3200, ["runner.max_cycles=10000", f"runner.workers={workers}"])
+
+
+@pytest.mark.parametrize("scheme, params", [
+    ("freepipe-mdts", {}),                            # triangle blocks, atomic chains held as the run's
+    ("kbuffer", {"k": 8}),                            # RMW hazards scaled from each replicate's
+    ("wboit", {}),
+])
+def test_parallel_replicates_give_the_serial_record(small, scheme, params):
+    """The sampled level's replicates, one per process, give exactly the serial figures (each lowers and
+    replays its sample in a forked process; what they share is counted once before the fork)."""
+    result = make_scheme(scheme, params).run(small)
+    out = []
+    for workers in (1, 2, 3):
+        gpu = load_gpu("gtx280", [f"runner.workers={workers}", "sample.min_tiles=1"])
+        rec, _ = FIDELITIES["sampled"](result, small, gpu)
+        rec.pop("event_seconds")
+        out.append(rec)
+    assert out[0] == out[1] == out[2]
+    assert out[0]["sample"]["share"] < 1
+
+
+def test_fork_map_keeps_order_and_gives_up_on_a_failure():
+    from gpusim.hw.parallel import fork_map, fork_workers
+    assert fork_map(lambda x: x * x, list(range(7)), 3) == [x * x for x in range(7)]
+
+    def fails_on_4(x):
+        if x == 4:
+            raise ValueError("four")
+        return x
+    assert fork_map(fails_on_4, list(range(7)), 2) is None        # the caller redoes it serially
+    assert fork_workers(1, 4, 1e9, 1) == 1                        # serial asked for
+    assert fork_workers(0, 4, 10, 100) == 1                       # auto: too small to gain
+    assert fork_workers(3, 2, 10, 100) == 2                       # no more processes than jobs

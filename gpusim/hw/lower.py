@@ -236,11 +236,32 @@ def _bits(n: int) -> int:
 
 
 class Pieces(list):
-    """:func:`plan_pieces`: a list of pieces, and what samples of the run share (``loads``: each piece's shared
-    unit instances and the whole run's load on them, once :func:`_occupancy` has counted them: samples of one
-    run on one GPU's memory and ROPs)."""
+    """:func:`plan_pieces`: a list of pieces, and what samples of the run share, counted once (by
+    :func:`share_pieces`, or by the first sample lowered): ``loads``, each piece's shared unit instances
+    and the whole run's load on them (samples of one run on one GPU's memory and ROPs); ``words``, the
+    run's atomic words and the operations on each."""
 
     loads: dict | None = None
+    words: tuple | None = None
+    counted_words: bool = False
+
+
+def share_pieces(pieces: Pieces, plan: OpPlan, gpu, n_pass: int) -> None:
+    """Count what the samples of ``pieces`` (of a program of ``n_pass`` passes) share (:class:`Pieces`) now,
+    before samples are lowered in processes of their own (each would count it again)."""
+    _run_loads(pieces, plan, gpu, n_pass)
+    _run_words(pieces, plan)
+
+
+def _run_words(pieces: list[_Piece], plan: OpPlan) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`_word_ops` of the atomic pieces of ``pieces``, counted once per :class:`Pieces`."""
+    if isinstance(pieces, Pieces) and pieces.counted_words:
+        return pieces.words
+    words = _word_ops([pc for pc in pieces if pc.instructions is None
+                       and entry_unit(plan.groups[pc.group].op) == "atomic"])
+    if isinstance(pieces, Pieces):
+        pieces.words, pieces.counted_words = words, True
+    return words
 
 
 def plan_pieces(work: Workload, passes: tuple[int, int] | None = None) -> Pieces:
@@ -302,8 +323,7 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
         totals[pc.pass_index] += pc.operations
     if keep is not None:
         masks = sample_masks(pieces, keep, p_first)
-        words = _word_ops([pc for pc in pieces if pc.instructions is None
-                           and entry_unit(plan.groups[pc.group].op) == "atomic"])
+        words = _run_words(shared, plan)
         occupancy = _occupancy(shared, masks, plan, gpu, n_pass)
         for j, (pc, m) in enumerate(zip(pieces, masks)):
             if not m.all():
@@ -489,6 +509,19 @@ def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pas
     them; operations on the atomic units and ROPs) over
     the kept threads' (1 where they put none); None when every factor is 1. The run's loads are counted once
     per ``pieces`` (``Pieces.loads``)."""
+    cache = _run_loads(pieces, plan, gpu, n_pass)
+    every, kept = cache["every"], {}
+    for entries, m in zip(cache["keys"], masks):
+        for name, n, key, weight in entries:
+            kept[name] = kept.get(name, 0) + np.bincount(key[m], weights=weight[m], minlength=n_pass * n)
+    out = {name: np.where(k > 0, every[name] / np.maximum(k, 1e-9), 1.0).reshape(n_pass, -1)
+           for name, k in kept.items()}
+    return {k: v for k, v in out.items() if not (v == 1).all()} or None
+
+
+def _run_loads(pieces, plan: OpPlan, gpu, n_pass: int) -> dict:
+    """Each piece's [(shared unit, instances, instance key per row, weight per row)] and the run's load on each
+    instance in each pass (``every``), counted once per :class:`Pieces` (:func:`_occupancy`)."""
     mem = gpu.memory
     # per unit the core issues to: the shared units it loads, each (name, instances, bytes per operation's byte:
     # None for a load of one per operation); a ROP's framebuffer reads and writes load the memory partitions too
@@ -510,13 +543,7 @@ def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pas
                                                                                  minlength=n_pass * n)
         if isinstance(pieces, Pieces):
             pieces.loads = cache
-    every, kept = cache["every"], {}
-    for entries, m in zip(cache["keys"], masks):
-        for name, n, key, weight in entries:
-            kept[name] = kept.get(name, 0) + np.bincount(key[m], weights=weight[m], minlength=n_pass * n)
-    out = {name: np.where(k > 0, every[name] / np.maximum(k, 1e-9), 1.0).reshape(n_pass, -1)
-           for name, k in kept.items()}
-    return {k: v for k, v in out.items() if not (v == 1).all()} or None
+    return cache
 
 
 def _word_key(address, pass_index: int) -> np.ndarray:

@@ -76,6 +76,60 @@ def plan_shares(machine) -> list[list[int]]:
     return [sorted(s) for s in shares]
 
 
+def fork_workers(workers: int, jobs: int, work_each: float, least: float) -> int:
+    """Processes for ``jobs`` independent jobs of about ``work_each`` each under ``runner.workers`` =
+    ``workers`` (0: one per available CPU when ``work_each`` is at least ``least``, where a fork's cost is
+    small beside a job's): 1 (serial) where forking cannot or should not be done."""
+    auto = workers == 0
+    if auto:
+        workers = available_cpus() if work_each >= least else 1
+    if min(workers, jobs) < 2 or "fork" not in multiprocessing.get_all_start_methods() or _other_threads():
+        return 1
+    return min(workers, jobs)
+
+
+def fork_map(fn, items: list, workers: int) -> list | None:
+    """``[fn(item) for item in items]`` in ``workers`` forked processes (item ``i`` in process ``i % workers``:
+    nothing is pickled on the way in, the results on the way out); None when a process failed or died, for
+    the caller to redo the work serially (so that errors read exactly as in a serial run)."""
+    ctx = multiprocessing.get_context("fork")
+    shares = [list(range(k, len(items), workers)) for k in range(workers)]
+    procs = []
+    try:
+        for share in shares:
+            recv, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_map_child, args=(fn, [items[i] for i in share], send), daemon=True)
+            proc.start()
+            send.close()
+            procs.append((proc, recv))
+        got = []
+        for proc, recv in procs:
+            try:
+                got.append(recv.recv())
+            except EOFError:               # the process died without a word (killed, out of memory)
+                got.append(None)
+    finally:
+        for proc, recv in procs:
+            recv.close()
+            proc.join()
+    if any(g is None for g in got):
+        return None
+    out: list = [None] * len(items)
+    for share, results in zip(shares, got):
+        for i, r in zip(share, results):
+            out[i] = r
+    return out
+
+
+def _map_child(fn, items: list, conn) -> None:
+    try:
+        conn.send([fn(item) for item in items])
+    except BaseException:                  # the parent redoes the work serially, where the error reads as it is
+        conn.send(None)
+    finally:
+        conn.close()
+
+
 def _child(machine, share: list[int], conn) -> None:
     try:
         machine.progress = None            # the parent's bar: counted there once the shares are back

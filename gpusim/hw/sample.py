@@ -76,15 +76,20 @@ import time
 import numpy as np
 
 from gpusim.errors import GpusimError
-from gpusim.hw.lower import INDEX_BASE, Workload, hash32, lower, plan_pieces, sample_masks, thread_mapping
+from gpusim.hw.lower import (INDEX_BASE, Workload, hash32, lower, plan_pieces, sample_masks, share_pieces, split_by,
+                             thread_mapping)
 from gpusim.hw.memory import MEMORY_OPS
 from gpusim.hw.memory.l2 import line_keys
+from gpusim.hw.parallel import fork_map, fork_workers
 from gpusim.hw.program import Program
 from gpusim.hw.raster import per_triangle_cycles
 from gpusim.hw.rop import framebuffer_operations
 from gpusim.hw.stream import ADVICE, StreamedRun, plan_chunks
 from gpusim.opplan import OPS
 
+#: operations a replicate keeps (about) from which ``runner.workers = 0`` replays the replicates in processes of
+#: their own: a fork costs 10-50 ms, a replicate of 100K operations about 0.1 s of event work
+MIN_REPLICATE_OPERATIONS = 100_000
 #: unit figures that add up over the work (a sample's are scaled up by its share); the others are kept as they are
 ADDITIVE = ("requests", "busy_cycles", "bytes", "hits", "misses", "stalls", "overflows", "addresses")
 
@@ -252,6 +257,12 @@ class Replicates:
         self.units: dict[int, list] = {}         # pass -> the sampling unit of each thread of each group
         self.info = {"tiles": occupied, "tiles_per_replicate": int(self.tiles[0].sum()),
                      "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
+
+    def prepare(self, pieces) -> None:
+        """Each pass's sampling units (:meth:`units_of`) of the threads of ``pieces`` (of the whole run), as
+        :class:`Keep` asks for them: made now, before the replicates are lowered in processes of their own."""
+        for p, js in split_by(np.array([pc.pass_index for pc in pieces], np.int64)):
+            self.units_of(p, [pieces[j].thread for j in js], thread_mapping(self.gpu, self.work.plan.passes[p]))
 
     def tile_of(self, pixel):
         tile = self.gpu.sample.tile
@@ -459,16 +470,28 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     runs: list[dict] = []
     machines: list[int] = []
     if chunks is None:
-        for r in range(reps.count):
-            if share >= 1 and runs:              # every replicate is the whole run: the same figures
-                runs.append(runs[0])
-                machines.append(sms)
-                continue
+        count = 1 if share >= 1 else reps.count      # every replicate the whole run: the same figures
+
+        def replicate(r: int, gpu=gpu) -> tuple[dict, int]:
             machine, program = _replicate_program(work, gpu, reps, r, pieces, every_lines=every_lines, front=front)
             rec, _ = run_full(work, machine, program=program)
-            runs.append(_replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
-                                   rmw_threads(program, work), rmw_all))
-            machines.append(machine.core.sms)
+            return _replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
+                              rmw_threads(program, work), rmw_all), machine.core.sms
+
+        # the replicates are independent: one per process where the CPUs and their size allow (each then
+        # replays its passes serially); the figures are the same
+        workers = fork_workers(gpu.runner.workers, count, share * work.plan.total_ops(), MIN_REPLICATE_OPERATIONS)
+        done = None
+        if workers > 1:                          # what the replicates share, counted once before the fork
+            share_pieces(pieces, work.plan, gpu, len(work.plan.passes))
+            reps.prepare(pieces)
+            serial = gpu.replace(runner=dataclasses.replace(gpu.runner, workers=1))
+            done = fork_map(lambda r: replicate(r, serial), list(range(count)), workers)
+        if done is None:
+            done = [replicate(r) for r in range(count)]
+        runs, machines = [d[0] for d in done], [d[1] for d in done]
+        runs += runs[:1] * (reps.count - count)
+        machines += machines[:1] * (reps.count - count)
     else:                                    # a chunk of passes at a time, each replicate's sample of each
         count = 1 if share >= 1 else reps.count
         fit = _chunked_sms(work, gpu, reps, count, chunks)
