@@ -92,26 +92,8 @@ def fork_map(fn, items: list, workers: int) -> list | None:
     """``[fn(item) for item in items]`` in ``workers`` forked processes (item ``i`` in process ``i % workers``:
     nothing is pickled on the way in, the results on the way out); None when a process failed or died, for
     the caller to redo the work serially (so that errors read exactly as in a serial run)."""
-    ctx = multiprocessing.get_context("fork")
     shares = [list(range(k, len(items), workers)) for k in range(workers)]
-    procs = []
-    try:
-        for share in shares:
-            recv, send = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_map_child, args=(fn, [items[i] for i in share], send), daemon=True)
-            proc.start()
-            send.close()
-            procs.append((proc, recv))
-        got = []
-        for proc, recv in procs:
-            try:
-                got.append(recv.recv())
-            except EOFError:               # the process died without a word (killed, out of memory)
-                got.append(None)
-    finally:
-        for proc, recv in procs:
-            recv.close()
-            proc.join()
+    got = _forked(_map_child, [(fn, [items[i] for i in share]) for share in shares])
     if any(g is None for g in got):
         return None
     out: list = [None] * len(items)
@@ -119,6 +101,31 @@ def fork_map(fn, items: list, workers: int) -> list | None:
         for i, r in zip(share, results):
             out[i] = r
     return out
+
+
+def _forked(target, args: list[tuple]) -> list:
+    """``target(*a, conn)`` in a forked process per ``a`` of ``args``: what each sent on ``conn``, in order (None
+    for a process that died without a word: killed, out of memory)."""
+    ctx = multiprocessing.get_context("fork")
+    procs = []
+    try:
+        for a in args:
+            recv, send = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=target, args=(*a, send), daemon=True)
+            proc.start()
+            send.close()
+            procs.append((proc, recv))
+        got = []
+        for proc, recv in procs:
+            try:
+                got.append(recv.recv())
+            except EOFError:
+                got.append(None)
+    finally:
+        for proc, recv in procs:
+            recv.close()
+            proc.join()
+    return got
 
 
 def _map_child(fn, items: list, conn) -> None:
@@ -145,25 +152,8 @@ def _child(machine, share: list[int], conn) -> None:
 
 def run_shares(machine, shares: list[list[int]]) -> bool:
     """Replay ``shares`` in parallel into ``machine`` (left untouched on failure); whether it succeeded."""
-    ctx = multiprocessing.get_context("fork")
-    procs = []
-    try:
-        for share in shares:
-            recv, send = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_child, args=(machine, share, send), daemon=True)
-            proc.start()
-            send.close()
-            procs.append((proc, recv))
-        got = []
-        for proc, recv in procs:
-            try:
-                got.append(recv.recv())
-            except EOFError:               # the process died without a word (killed, out of memory)
-                got.append(("failed", "worker exited", None, None))
-    finally:
-        for proc, recv in procs:
-            recv.close()
-            proc.join()
+    got = [("failed", "worker exited", None, None) if g is None else g
+           for g in _forked(_child, [(machine, share) for share in shares])]
     if any(g[0] != "ok" for g in got):
         return False
     _merge(machine, shares, got)
