@@ -238,3 +238,41 @@ def test_a_small_run_samples_at_least_min_tiles_and_the_smallest_is_the_run(sphe
     part = replay(spheres, "kbuffer", {"k": 8}, "sampled", load_gpu("gtx280", ["runner.workers=1",
                                                                               "sample.min_tiles=10"]))[1]["timing"]
     assert part["sample"]["sms"] == 5 and part["sample"]["tiles_per_replicate"] == 10
+
+
+@pytest.mark.parametrize("scheme, params", [
+    ("dual-depth-peeling", {}),                        # fragment passes, then a pixel pass (all its rows)
+    ("freepipe-mdts", {}),                             # triangle blocks, atomic chains (the census's words)
+    ("kbuffer", {"k": 8, "order": "centroid", "batch": 16}),
+    ("tfss", {}),
+])
+def test_pieces_of_the_candidate_rows_lower_the_same_samples(scheme, params):
+    """The sampled level builds the pieces of the rows some replicate may keep (every row of a pass in which
+    a replicate holds none: it keeps one of the pass's units), counting every operation in a census: each
+    replicate's program is the one the pieces of every row give."""
+    from gpusim.hw import sample
+    from gpusim.schemes import make_scheme
+    trace = trace_scene(*load_scene("nested-spheres", ["screen.width=48", "screen.height=48"]), progress=False)
+    result = make_scheme(scheme, params).run(trace)
+    work = Workload.of(result, trace)
+    gpu = load_gpu("gtx280", ["runner.workers=1", "sample.min_tiles=1"])
+    reps, again = Replicates(work, gpu), Replicates(work, gpu)      # one design (a Replicates caches units)
+    every = plan_pieces(work)
+    some, _ = sample._pieces(work, gpu, again, None)
+    assert sum(len(pc.thread) for pc in some) < sum(len(pc.thread) for pc in every)
+    small = scaled_gpu(gpu, reps.sms)
+    for r in range(reps.count):
+        a = lower(work, small, Keep(reps, r), pieces=every)
+        b = lower(work, small, Keep(again, r), pieces=some)
+        for name in ("row_lo", "row_hi", "wi_op", "wi_unit", "wi_cycles", "wi_dep", "wi_warp", "wi_pass", "wi_k"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        assert [(p.operations, p.operations_total, p.warps) for p in a.passes] == \
+            [(p.operations, p.operations_total, p.warps) for p in b.passes]
+        assert (a.occupancy is None) == (b.occupancy is None)
+        for unit in a.occupancy or {}:
+            assert np.array_equal(a.occupancy[unit], b.occupancy[unit]), unit
+        assert (a.hold_scale is None) == (b.hold_scale is None)
+        if a.hold_scale is not None:
+            assert np.array_equal(a.hold_scale, b.hold_scale)
+        for unit, rows in a.row_sets.items():
+            assert np.array_equal(rows.address, b.row_sets[unit].address), unit

@@ -205,9 +205,11 @@ def ops_in_passes(g, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
     return i, np.arange(len(i), dtype=np.int64) - np.repeat(np.cumsum(m) - m, m) + s0
 
 
-def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None) -> list[_Piece]:
+def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None, keep_rows=None,
+                  census: "Census | None" = None) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes; only those of passes
-    ``passes[0]`` to ``passes[1] - 1`` when given."""
+    ``passes[0]`` to ``passes[1] - 1`` when given, and of those only the rows ``keep_rows(pass, threads,
+    lane)`` keeps (a mask, or None for all), every row counted in ``census`` first (see :func:`plan_pieces`)."""
     n = len(g.thread)
     threads = g.thread_ids()
     i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
@@ -218,8 +220,20 @@ def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | N
     addr = np.asarray(g.offset(i, seq), np.int64) + (0 if g.is_compute else bases[g.structure])
     nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
     pass_of = g.pass_of(i, seq)
+    if census is not None and not g.is_compute:
+        census.add(g.op, pass_of, addr, nbytes)
+    rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
+    if rows is not None and not rows.all():
+        sel = np.flatnonzero(rows)
+        if not len(sel):
+            return []
+        i, seq, addr = i[sel], seq[sel], addr[sel]
+        nbytes = nbytes if np.isscalar(nbytes) else nbytes[sel]
+        instr = None if instr is None else instr[sel]
+        pass_of = pass_of if np.isscalar(pass_of) else pass_of[sel]
+    whole = single and len(i) == n                 # every thread's one operation, in thread order
     if np.isscalar(pass_of):
-        return [_Piece(gi, int(pass_of), threads if single else threads[i], None if single else seq, addr, nbytes,
+        return [_Piece(gi, int(pass_of), threads if whole else threads[i], None if single else seq, addr, nbytes,
                        instr)]
     pieces = []
     for p, sel in split_by(np.asarray(pass_of, np.int64)):
@@ -244,6 +258,38 @@ class Pieces(list):
     loads: dict | None = None
     words: tuple | None = None
     counted_words: bool = False
+    census: "Census | None" = None          # the whole run's counts, where the pieces hold only some rows
+    totals: np.ndarray | None = None        # then: the run's memory operations in each pass
+
+
+class Census:
+    """What a sample needs to know of every operation of a run (or of a chunk of its passes) that
+    :func:`plan_pieces` counts, where the pieces keep only the rows some sample may keep: the run's load on
+    each shared unit's instances in each pass (:func:`_occupancy`), its atomic words and the operations on
+    each (``Program.hold_scale``) and, where ``lines``, the addresses its operations send down the memory
+    path (an L2's lines)."""
+
+    def __init__(self, plan: OpPlan, gpu, passes: tuple[int, int] | None = None, lines: bool = False):
+        self.gpu = gpu
+        self.p_first, p_end = passes if passes is not None else (0, len(plan.passes))
+        self.n_pass = p_end - self.p_first
+        self.every: dict[str, np.ndarray] = {}
+        self.words: list[np.ndarray] = []
+        self.addresses: list | None = [] if lines else None
+
+    def add(self, op: str, pass_of, address: np.ndarray, nbytes) -> None:
+        """Count a memory group's operations: their passes (the plan's numbers), addresses and bytes."""
+        p = pass_of - self.p_first
+        for name, n, key, weight in _unit_keys(op, p, address, nbytes, self.gpu):
+            self.every[name] = self.every.get(name, 0) + np.bincount(key, weights=weight, minlength=self.n_pass * n)
+        if entry_unit(op) == "atomic":
+            self.words.append(_word_key(address, p))
+        if self.addresses is not None:
+            self.addresses.append((op, address))
+
+    def word_ops(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """:func:`_word_ops` of the run's atomic operations."""
+        return np.unique(np.concatenate(self.words), return_counts=True) if self.words else None
 
 
 def share_pieces(pieces: Pieces, plan: OpPlan, gpu, n_pass: int) -> None:
@@ -257,20 +303,32 @@ def _run_words(pieces: list[_Piece], plan: OpPlan) -> tuple[np.ndarray, np.ndarr
     """:func:`_word_ops` of the atomic pieces of ``pieces``, counted once per :class:`Pieces`."""
     if isinstance(pieces, Pieces) and pieces.counted_words:
         return pieces.words
-    words = _word_ops([pc for pc in pieces if pc.instructions is None
-                       and entry_unit(plan.groups[pc.group].op) == "atomic"])
+    if isinstance(pieces, Pieces) and pieces.census is not None:
+        words = pieces.census.word_ops()
+    else:
+        words = _word_ops([pc for pc in pieces if pc.instructions is None
+                           and entry_unit(plan.groups[pc.group].op) == "atomic"])
     if isinstance(pieces, Pieces):
         pieces.words, pieces.counted_words = words, True
     return words
 
 
-def plan_pieces(work: Workload, passes: tuple[int, int] | None = None) -> Pieces:
+def plan_pieces(work: Workload, passes: tuple[int, int] | None = None, keep_rows=None,
+                census: Census | None = None) -> Pieces:
     """The rows of each group in each pass (of ``passes``, numbered from its first), before lanes are known;
-    :func:`lower` takes them (``pieces``) when it lowers several samples of one run."""
+    :func:`lower` takes them (``pieces``) when it lowers several samples of one run. ``keep_rows(pass,
+    threads, lane)`` (each row's pass, or one for all; a group's threads; each row's index into them): the
+    rows to keep (the sampled level's: those some sample may keep), a mask or None for all;
+    then every operation is counted in ``census`` (made for the same ``passes``), which the samples'
+    lowering reads for the whole run's loads and atomic words."""
     p_first = passes[0] if passes is not None else 0
-    pieces = Pieces(pc for gi, g in enumerate(work.plan.groups) for pc in _group_pieces(gi, g, work.bases, passes))
+    pieces = Pieces(pc for gi, g in enumerate(work.plan.groups)
+                    for pc in _group_pieces(gi, g, work.bases, passes, keep_rows, census))
     for pc in pieces:                  # pass numbers of this program
         pc.pass_index -= p_first
+    if keep_rows is not None:
+        pieces.census = census
+        pieces.totals = pass_operations(work.plan)[p_first:(passes[1] if passes is not None else None)]
     return pieces
 
 
@@ -318,9 +376,11 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
     modes = [thread_mapping(gpu, p) for p in plan.passes[p_first:p_end]]
     shared = pieces if pieces is not None else plan_pieces(work, passes)
     pieces = list(shared)
-    totals = np.zeros(n_pass, np.int64)
-    for pc in pieces:
-        totals[pc.pass_index] += pc.operations
+    totals = getattr(shared, "totals", None)
+    if totals is None:
+        totals = np.zeros(n_pass, np.int64)
+        for pc in pieces:
+            totals[pc.pass_index] += pc.operations
     if keep is not None:
         masks = sample_masks(pieces, keep, p_first)
         words = _run_words(shared, plan)
@@ -521,34 +581,44 @@ def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pas
 
 def _run_loads(pieces, plan: OpPlan, gpu, n_pass: int) -> dict:
     """Each piece's [(shared unit, instances, instance key per row, weight per row)] and the run's load on each
-    instance in each pass (``every``), counted once per :class:`Pieces` (:func:`_occupancy`)."""
-    mem = gpu.memory
-    # per unit the core issues to: the shared units it loads, each (name, instances, bytes per operation's byte:
-    # None for a load of one per operation); a ROP's framebuffer reads and writes load the memory partitions too
-    memory = ("memory", mem.partitions, 1)
-    instances = {"coalescer": (memory,), "atomic": (("atomic", mem.partitions, None),),
-                 "rop": (("rop", gpu.rop.units, None),) + (((*memory[:2], 2),) if framebuffer_traffic(gpu) else ())}
+    instance in each pass (``every``: the census's where the pieces hold only some rows), counted once per
+    :class:`Pieces` (:func:`_occupancy`)."""
     cache = pieces.loads if isinstance(pieces, Pieces) and pieces.loads is not None else None
-    if cache is None:                   # each piece's [(unit, n, instance key, weight)], and the run's loads
-        cache = {"keys": [], "every": {}}
+    if cache is None:
+        census = pieces.census if isinstance(pieces, Pieces) else None
+        cache = {"keys": [], "every": {} if census is None else census.every}
         for pc in pieces:
-            entries = [] if pc.instructions is not None else instances.get(entry_unit(plan.groups[pc.group].op), ())
-            cache["keys"].append([])
-            for name, n, per_byte in entries:
-                key = pc.pass_index * n + interleave(pc.address, mem.interleave_bytes, n)
-                weight = np.broadcast_to(1.0 if per_byte is None else per_byte * np.asarray(pc.nbytes, np.float64),
-                                         key.shape)
-                cache["keys"][-1].append((name, n, key, weight))
-                cache["every"][name] = cache["every"].get(name, 0) + np.bincount(key, weights=weight,
-                                                                                 minlength=n_pass * n)
+            entries = ([] if pc.instructions is not None
+                       else _unit_keys(plan.groups[pc.group].op, pc.pass_index, pc.address, pc.nbytes, gpu))
+            cache["keys"].append(entries)
+            if census is None:
+                for name, n, key, weight in entries:
+                    cache["every"][name] = cache["every"].get(name, 0) + np.bincount(key, weights=weight,
+                                                                                     minlength=n_pass * n)
         if isinstance(pieces, Pieces):
             pieces.loads = cache
     return cache
 
 
+def _unit_keys(op: str, pass_index, address: np.ndarray, nbytes, gpu) -> list[tuple]:
+    """The shared units operations ``op`` load, each (name, instances, instance key per row: pass x instances
+    + instance, load per row): the memory partitions (bytes), the atomic units and ROPs (one per operation);
+    a ROP's framebuffer reads and writes load the memory partitions too."""
+    mem = gpu.memory
+    memory = ("memory", mem.partitions, 1)
+    instances = {"coalescer": (memory,), "atomic": (("atomic", mem.partitions, None),),
+                 "rop": (("rop", gpu.rop.units, None),) + (((*memory[:2], 2),) if framebuffer_traffic(gpu) else ())}
+    out = []
+    for name, n, per_byte in instances.get(entry_unit(op), ()):
+        key = np.asarray(pass_index, np.int64) * n + interleave(address, mem.interleave_bytes, n)
+        weight = np.broadcast_to(1.0 if per_byte is None else per_byte * np.asarray(nbytes, np.float64), key.shape)
+        out.append((name, n, key, weight))
+    return out
+
+
 def _word_key(address, pass_index: int) -> np.ndarray:
     """An atomic word in a pass, as one integer (addresses stay under 2**44 bytes)."""
-    return np.asarray(address, np.int64) + (np.int64(pass_index) << 44)
+    return np.asarray(address, np.int64) + (np.asarray(pass_index, np.int64) << 44)
 
 
 def _word_ops(pieces: list[_Piece]) -> tuple[np.ndarray, np.ndarray] | None:

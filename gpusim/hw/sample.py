@@ -76,8 +76,8 @@ import time
 import numpy as np
 
 from gpusim.errors import GpusimError
-from gpusim.hw.lower import (INDEX_BASE, Workload, hash32, lower, plan_pieces, sample_masks, share_pieces, split_by,
-                             thread_mapping)
+from gpusim.hw.lower import (INDEX_BASE, Census, Workload, hash32, lower, pass_operations, plan_pieces, sample_masks,
+                             share_pieces, split_by, thread_mapping)
 from gpusim.hw.memory import MEMORY_OPS
 from gpusim.hw.memory.l2 import line_keys
 from gpusim.hw.parallel import fork_map, fork_workers
@@ -253,10 +253,51 @@ class Replicates:
         self.triangles = _stratified(np.bincount(np.arange(triangles) // ws, weights=per_triangle,
                                                  minlength=blocks), np.ones(blocks, bool), share, self.count, rng,
                                      int(per_triangle.argmax()) // ws if len(prims) else -1)
+        self.codes = None                        # per pass: its index in _MODES (candidate_rows)
+        self.seen = np.zeros(len(work.plan.passes), np.int64)   # per pass: the replicates holding one of its rows
         self.lanes: dict[int, tuple] = {}        # pass -> its lanes and the replicates' choice of their warps
         self.units: dict[int, list] = {}         # pass -> the sampling unit of each thread of each group
         self.info = {"tiles": occupied, "tiles_per_replicate": int(self.tiles[0].sum()),
                      "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
+
+    def candidate_rows(self, pass_of, threads: np.ndarray, lane: np.ndarray) -> np.ndarray | None:
+        """Of operations in passes ``pass_of`` (one for all, or one per operation) of ``threads[lane]``, those
+        some replicate may keep (:func:`gpusim.hw.lower.plan_pieces`' ``keep_rows``): a fragment thread's in a
+        tile, a triangle thread's in a triangle block, that a replicate holds; every one of a pass whose
+        threads fill warps in order (its warps are chosen from all of them). None: all of them. Each pass's
+        replicates that hold one of its operations are noted in :attr:`seen` (:func:`_pieces`)."""
+        if self.codes is None:
+            modes = [thread_mapping(self.gpu, pk) for pk in self.work.plan.passes]
+            self.codes = np.array([_MODES.index(m) for m in modes], np.int8)
+            # per fragment: the replicates that hold its tile (bit r), and its triangle's block
+            bits = (1 << np.arange(self.count, dtype=np.int64))[:, None]
+            self.held = (None, (self.tiles * bits).sum(axis=0)[self.frag_tile],
+                         (self.triangles * bits).sum(axis=0)[self.work.frag_prim // self.gpu.core.warp_size])
+        if np.isscalar(pass_of):
+            lo, hi = int(pass_of), int(pass_of) + 1
+        else:
+            lo, hi = int(pass_of.min()), int(pass_of.max()) + 1
+        codes = self.codes[lo:hi]
+        if (codes == 0).all():                     # warps of the pass's threads: all of them
+            return None
+        if (codes == codes[0]).all():              # one mapping for every row: decided per thread
+            held = self.held[int(codes[0])][threads][lane]
+        else:
+            code = self.codes[pass_of]
+            held = np.full(len(lane), -1, np.int64)
+            for c in (1, 2):
+                rows = np.flatnonzero(code == c)
+                if len(rows):
+                    held[rows] = self.held[c][threads[lane[rows]]]
+        if np.isscalar(pass_of):
+            self.seen[lo] |= int(np.bitwise_or.reduce(held[held > 0])) if len(held) else 0
+        else:                                     # each pass's combinations of holders, then their union
+            R = self.count
+            mine = held > 0
+            combos = np.bincount(((pass_of[mine] - lo) << R) | held[mine], minlength=(hi - lo) << R)
+            for c in np.flatnonzero(combos):
+                self.seen[lo + (c >> R)] |= c & ((1 << R) - 1)
+        return held != 0
 
     def prepare(self, pieces) -> None:
         """Each pass's sampling units (:meth:`units_of`) of the threads of ``pieces`` (of the whole run), as
@@ -301,6 +342,10 @@ class Replicates:
             self.lanes[p] = lanes, _stratified(weight, np.ones(n, bool), self.share, self.count,
                                                np.random.default_rng([self.seed, p]), certain)
         return self.lanes[p]
+
+
+#: how a pass's threads become lanes (gpusim.hw.lower.thread_mapping), as candidate_rows numbers them
+_MODES = ("thread", "fragment", "triangle")
 
 
 class Keep:
@@ -432,14 +477,48 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
     return out
 
 
+def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None, lines: bool = False):
+    """:func:`gpusim.hw.lower.plan_pieces` of the run (of its passes ``passes``) for its replicates: only the rows
+    some replicate may keep (:meth:`Replicates.candidate_rows`), every operation counted in a census (with
+    its memory-path addresses where ``lines``); all of them, and no census, where a replicate is the run."""
+    if reps.share >= 1:
+        return plan_pieces(work, passes), None
+    census = Census(work.plan, gpu, passes, lines)
+    return _candidate_pieces(work, reps, passes, census), census
+
+
+def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, census: Census | None):
+    """The pieces of the rows some replicate may keep (:meth:`Replicates.candidate_rows`), and every row of a
+    graphics or software-rasterizer pass in which a replicate holds none: :class:`Keep` gives that replicate
+    one unit of the pass's, drawn from all of its rows (as from the pieces of every row)."""
+    first, end = passes if passes is not None else (0, len(work.plan.passes))
+    reps.seen[first:end] = 0
+    pieces = plan_pieces(work, passes, reps.candidate_rows, census)
+    rows = pass_operations(work.plan)[first:end] > 0
+    every = (1 << reps.count) - 1
+    short = np.flatnonzero(rows & (reps.codes[first:end] != 0) & (reps.seen[first:end] != every)) + first
+    if not len(short):
+        return pieces
+    whole = np.zeros(len(work.plan.passes), bool)
+    whole[short] = True
+    extra = plan_pieces(work, passes, lambda pass_of, threads, lane: (
+        None if np.isscalar(pass_of) and whole[int(pass_of)] else np.broadcast_to(whole[pass_of], np.shape(lane))))
+    merged = sorted([pc for pc in pieces if not whole[pc.pass_index + first]] + list(extra),
+                    key=lambda pc: (pc.group, pc.pass_index))
+    out = type(pieces)(merged)
+    out.census, out.totals = pieces.census, pieces.totals
+    return out
+
+
 def _chunked_sms(work: Workload, gpu, reps: Replicates, count: int, chunks: list[tuple[int, int]]) -> list[int]:
     """The SMs of each of the first ``count`` replicates of a run sampled a chunk of passes at a time: as
     :func:`replicate_sms` gives for its sample of the whole run (one machine size for every chunk, as when the
     run is lowered at once), from the operations its sample keeps of each chunk's."""
     kept, total = [0] * count, 0
     for first, end in chunks:
-        pieces = plan_pieces(work, (first, end))
-        total += sum(pc.operations for pc in pieces)
+        pieces = (_candidate_pieces(work, reps, (first, end), None) if reps.share < 1    # no census: counts only
+                  else plan_pieces(work, (first, end)))
+        total += int(pieces.totals.sum()) if pieces.totals is not None else sum(pc.operations for pc in pieces)
         for r in range(count):
             masks = sample_masks(pieces, Keep(reps, r), first)
             kept[r] += sum(int(np.count_nonzero(m)) for pc, m in zip(pieces, masks) if pc.instructions is None)
@@ -462,11 +541,12 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
                           f"= {gpu.runner.max_operations:,}, and the GPU's L2 carries state from pass to pass, so "
                           f"it cannot be sampled a chunk of passes at a time; {ADVICE}")
     rmw_all = rmw_threads(work.plan, work)
-    pieces = plan_pieces(work) if chunks is None else None
-    every_lines = None                       # the run's L2 lines and touches of each (gpusim.hw.memory.l2)
-    if gpu.l2.size_bytes and share < 1:
-        every_lines = line_touches(gpu, memory_path_addresses(
-            gpu, [(work.plan.groups[pc.group].op, pc.address) for pc in pieces if pc.instructions is None]))
+    pieces = census = every_lines = None     # every_lines: the run's L2 lines and touches of each (memory.l2)
+    if chunks is None:
+        pieces, census = _pieces(work, gpu, reps, None, lines=bool(gpu.l2.size_bytes))
+    if census is not None and census.addresses is not None:
+        every_lines = line_touches(gpu, memory_path_addresses(gpu, census.addresses))
+        census.addresses = None
     runs: list[dict] = []
     machines: list[int] = []
     if chunks is None:
@@ -499,7 +579,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         ops: list[list] = [[] for _ in range(count)]
         readers: list[list] = [[] for _ in range(count)]
         for first, end in chunks:
-            pieces = plan_pieces(work, (first, end))
+            pieces, _ = _pieces(work, gpu, reps, (first, end))
             for r in range(count):
                 machine, program = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
                                                       sms=fit[r])
