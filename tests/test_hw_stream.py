@@ -82,12 +82,13 @@ def test_what_cannot_stream_is_refused_in_one_line(small):
         ("modern", int(per_pass.max()), "carry state from pass to pass"),         # an L2
     ]
     for gpu_name, limit, expect in cases:
-        gpu = load_gpu(gpu_name, ["runner.workers=1", f"runner.max_operations={limit}"])
-        with pytest.raises(GpusimError) as exc:
-            FIDELITIES["full"](result, small, gpu)
-        message = str(exc.value)
-        assert expect in message and "\n" not in message
-        assert "runner.max_operations" in message and "--fidelity analytic" in message
+        gpu = load_gpu(gpu_name, ["runner.workers=1", f"runner.max_operations={limit}", "sample.min_tiles=1"])
+        for level in ("full", "sampled"):             # the sampled level refuses what the full level cannot stream
+            with pytest.raises(GpusimError) as exc:
+                FIDELITIES[level](result, small, gpu)
+            message = str(exc.value)
+            assert expect in message and "\n" not in message
+            assert "runner.max_operations" in message and "--fidelity analytic" in message
         rec, _ = FIDELITIES["analytic"](result, small, gpu)      # the advice works
         assert rec["cycles"] > 0
 

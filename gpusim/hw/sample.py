@@ -75,7 +75,6 @@ import time
 
 import numpy as np
 
-from gpusim.errors import GpusimError
 from gpusim.hw.lower import (INDEX_BASE, Census, Workload, hash32, lower, pass_operations, plan_pieces, sample_masks,
                              share_pieces, split_by, thread_mapping)
 from gpusim.hw.memory import MEMORY_OPS
@@ -84,7 +83,7 @@ from gpusim.hw.parallel import fork_map, fork_workers
 from gpusim.hw.program import Program
 from gpusim.hw.raster import per_triangle_cycles
 from gpusim.hw.rop import framebuffer_operations
-from gpusim.hw.stream import ADVICE, StreamedRun, plan_chunks
+from gpusim.hw.stream import StreamedRun, carried_state, plan_chunks
 from gpusim.opplan import OPS
 
 #: operations a replicate keeps (about) from which ``runner.workers = 0`` replays the replicates in processes of
@@ -536,10 +535,8 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     # a run over runner.max_operations is sampled a chunk of passes at a time, as the full level replays it
     # (refused where the full level refuses it), before the pieces, which hold every operation of a chunk
     chunks = plan_chunks(work, gpu)
-    if chunks is not None and gpu.l2.size_bytes:
-        raise GpusimError(f"the run would lower {work.plan.total_ops():,} operations, over runner.max_operations "
-                          f"= {gpu.runner.max_operations:,}, and the GPU's L2 carries state from pass to pass, so "
-                          f"it cannot be sampled a chunk of passes at a time; {ADVICE}")
+    if chunks is not None and gpu.l2.size_bytes:       # refused before the chunks are counted, not at the first
+        raise carried_state(work, gpu)
     rmw_all = rmw_threads(work.plan, work)
     pieces = census = every_lines = None     # every_lines: the run's L2 lines and touches of each (memory.l2)
     if chunks is None:
@@ -549,8 +546,8 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         census.addresses = None
     runs: list[dict] = []
     machines: list[int] = []
+    count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
     if chunks is None:
-        count = 1 if share >= 1 else reps.count      # every replicate the whole run: the same figures
 
         def replicate(r: int, gpu=gpu) -> tuple[dict, int]:
             machine, program = _replicate_program(work, gpu, reps, r, pieces, every_lines=every_lines, front=front)
@@ -570,10 +567,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         if done is None:
             done = [replicate(r) for r in range(count)]
         runs, machines = [d[0] for d in done], [d[1] for d in done]
-        runs += runs[:1] * (reps.count - count)
-        machines += machines[:1] * (reps.count - count)
     else:                                    # a chunk of passes at a time, each replicate's sample of each
-        count = 1 if share >= 1 else reps.count
         fit = _chunked_sms(work, gpu, reps, count, chunks)
         streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in range(count)]
         ops: list[list] = [[] for _ in range(count)]
@@ -592,8 +586,8 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
             rec, _ = streamed_record(work, gpu, streams[r])
             runs.append(_replicate(work, rec, ops[r], rmw_threads(np.concatenate(readers[r]), work), rmw_all))
             machines.append(fit[r])
-        runs += runs[:1] * (reps.count - count)
-        machines += machines[:1] * (reps.count - count)
+    runs += runs[:1] * (reps.count - count)
+    machines += machines[:1] * (reps.count - count)
     n = len(runs)
     per_pass = np.array([run["cycles"] for run in runs], np.float64)       # (replicates, passes)
     totals = per_pass.sum(axis=1)

@@ -71,6 +71,14 @@ def plan_chunks(work, gpu) -> list[tuple[int, int]] | None:
     return ranges
 
 
+def carried_state(work, gpu) -> GpusimError:
+    """The refusal of a run over ``runner.max_operations`` whose units carry state from pass to pass (an L2),
+    which no level can replay a chunk of passes at a time."""
+    return GpusimError(f"the run would lower {work.plan.total_ops():,} operations, over runner.max_operations = "
+                       f"{gpu.runner.max_operations:,}, and its units carry state from pass to pass (an L2), so it "
+                       f"cannot be replayed a chunk of passes at a time; {ADVICE}")
+
+
 class _ChunkBar:
     """A progress bar as one chunk's machine sees it: its own warps, counted on the run's bar."""
 
@@ -118,10 +126,7 @@ class StreamedRun:
         bar = _ChunkBar(progress, program.warps) if progress is not None else None
         machine = Machine(gpu, program, self.work.width, bar)
         if machine.carries_state():
-            raise GpusimError(f"the run would lower {self.work.plan.total_ops():,} operations, over "
-                              f"runner.max_operations = {gpu.runner.max_operations:,}, and its units carry state "
-                              f"from pass to pass (an L2), so it cannot be replayed a chunk of passes at a time; "
-                              f"{ADVICE}")
+            raise carried_state(self.work, gpu)
         start = chunk_start = sum(p[2] for p in self.passes)
         machine.run()
         for pp, c in zip(program.passes, machine.pass_cycles):

@@ -206,20 +206,17 @@ class Unit:
 
     def absorb(self, other: "Unit") -> None:
         """Add what ``other`` counted (this unit, on the machine that replayed other passes of the run):
-        ``TOTALS`` added, ``COUNTERS`` merged as they say, per instance (a sampled replicate's machines may
-        have different numbers of SMs: the longer list's extra instances counted as they are); a sampled
-        program's :attr:`run_busy_fp` added, the busy sub-cycles standing for it where a machine had none
-        (its sample kept the whole load)."""
+        ``TOTALS`` added, ``COUNTERS`` merged as they say; a sampled program's :attr:`run_busy_fp` added, the
+        busy sub-cycles standing for it where a machine had none (its sample kept the whole load)."""
         if self.run_busy_fp is not None or other.run_busy_fp is not None:
-            self.run_busy_fp = _merged(self.busy_fp if self.run_busy_fp is None else self.run_busy_fp,
-                                       other.busy_fp if other.run_busy_fp is None else other.run_busy_fp,
-                                       operator.add)
+            self.run_busy_fp = [x + y for x, y in zip(self.busy_fp if self.run_busy_fp is None else self.run_busy_fp,
+                                                      other.busy_fp if other.run_busy_fp is None
+                                                      else other.run_busy_fp)]
         for a in dict.fromkeys((*self.TOTALS, *self.COUNTERS)):
             how = self.COUNTERS.get(a, operator.add)
             mine, theirs = getattr(self, a), getattr(other, a)
-            setattr(self, a, _merged(mine, theirs, how) if isinstance(mine, list) else how(mine, theirs))
-        if "instances" in self.KEPT:
-            self.instances = max(self.instances, other.instances)
+            setattr(self, a, [how(x, y) for x, y in zip(mine, theirs)] if isinstance(mine, list)
+                    else how(mine, theirs))
 
     # the interface the core and the machine use
     def serve(self, wi: int, now: int):
@@ -261,13 +258,6 @@ class Unit:
         if free is None:
             return f"{self.name}: -"
         return f"{self.name}: free " + " ".join(f"[{i}]{cycles(f)}" for i, f in enumerate(free[:8]))
-
-
-def _merged(mine: list, theirs: list, how) -> list:
-    """Two per-instance lists merged instance by instance; the longer one's extra instances as they are."""
-    both = [how(x, y) for x, y in zip(mine, theirs)]
-    longer = mine if len(mine) > len(theirs) else theirs
-    return both + list(longer[len(both):])
 
 
 #: name -> unit class (registration order); filled by @register_unit as the unit modules are imported
