@@ -8,9 +8,9 @@ import pytest
 
 from gpusim.hw import load_gpu
 from gpusim.hw.analytic import analytic_timing
-from gpusim.hw.lower import Workload, lower
+from gpusim.hw.lower import Workload, fragment_lanes, lower
 from gpusim.hw.machine import Machine
-from gpusim.hw.raster import bbox_pixels, per_triangle_cycles
+from gpusim.hw.raster import bbox_pixels, emission, per_triangle_cycles
 from gpusim.opplan import OpPlan, Pass, layout_bases
 
 from test_hw_units import SIMPLE
@@ -105,6 +105,89 @@ def test_partial_quads_fill_warps_with_helper_lanes():
         _, gpu, work, _ = _draw(pixels, np.zeros(32), 1)
         prog = lower(work, gpu)
         assert (prog.passes[0].quads, prog.passes[0].warps) == (quads, warps)
+
+
+TILES = ["raster.warp_packing=tiles"]
+
+
+def test_tile_owners_fill_warps_with_their_own_quads():
+    # warp_packing = tiles: 32 fragments in 8 full quads of one 8x8 tile fill one warp; 32 fragments each alone
+    # in its quad (every other pixel of row 0, x = 0..62) are 4 quads in each of 8 tiles, dealt to 8 owners
+    # (10 on gtx280): a warp each, 8 warps
+    full = np.array([(2 * (q // 4) + dy) * WIDTH + 2 * (q % 4) + dx for q in range(8)
+                     for dy in (0, 1) for dx in (0, 1)])
+    sparse = np.arange(32) * 2
+    for pixels, quads, warps in ((full, 8, 1), (sparse, 32, 8)):
+        plan, gpu, work, bases = _draw(pixels, np.zeros(32), 1, extra=TILES)
+        prog = lower(work, gpu)
+        assert (prog.passes[0].quads, prog.passes[0].warps) == (quads, warps)
+        assert analytic_timing(_Result(plan, bases), work, gpu)["passes"][0]["warps"] == warps
+    # with one owner the 32 quads pack 8 to a warp, whatever their tile
+    _, gpu, work, _ = _draw(sparse, np.zeros(32), 1, extra=[*TILES, "raster.tile_owners=1"])
+    assert lower(work, gpu).passes[0].warps == 4
+
+
+def test_rasterizer_emits_a_triangle_tile_by_tile_in_morton_order():
+    # one triangle over a 16x2 block, its fragments in the trace's row order: the rasterizer emits the left tile's
+    # 16 fragments (quads in Morton order, each quad's 4 pixels in Morton order), then the right tile's
+    x, y = np.meshgrid(np.arange(16), np.arange(2))
+    pixels = (y * WIDTH + x).ravel()
+    order, owner, _ = emission(np.zeros(32, np.int64), pixels, WIDTH, WIDTH, 8, 2)
+    ex, ey = pixels[order] % WIDTH, pixels[order] // WIDTH
+    assert list(zip(ex[:8], ey[:8])) == [(0, 0), (1, 0), (0, 1), (1, 1), (2, 0), (3, 0), (2, 1), (3, 1)]
+    assert (ex[:16] < 8).all() and (ex[16:] >= 8).all()
+    assert (owner[order] == np.repeat([0, 1], 16)).all()
+    # the two tiles have two owners: a warp each (8 quads would fit, 4 are there)
+    _, gpu, work, _ = _draw(pixels, np.zeros(32), 1, extra=TILES)
+    assert lower(work, gpu).passes[0].warps == 2
+
+
+def test_an_owner_packs_quads_of_its_tiles_from_several_triangles():
+    # 6 one-quad triangles: tiles (0, 0), (0, 0), (1, 0), (0, 0), (2, 0), (0, 0) on 2 owners (x + y mod 2): owner 0
+    # takes 5 quads (tiles 0 and 2), owner 1 one; at warp_size 32 (8 quads a warp) one warp each, numbered by
+    # their first quads (owner 0's first); at warp_size 8 (2 quads a warp) owner 0 fills 3 warps, in the order
+    # their quads come: 0 1 | owner 1's | 3 4 | 5
+    quad = np.array([0, 1, WIDTH, WIDTH + 1])
+    at = [(0, 0), (2, 0), (8, 0), (4, 0), (16, 0), (6, 0)]
+    pixels = np.concatenate([quad + yy * WIDTH + xx for xx, yy in at])
+    prims = np.repeat(np.arange(6), 4)
+    _, owner, _ = emission(prims, pixels, WIDTH, WIDTH, 8, 2)
+    assert list(owner[::4]) == [0, 0, 1, 0, 0, 0]
+    for extra, warps in (([], [0, 0, 1, 0, 0, 0]), (["core.warp_size=8", "scoreboard.entries=8"],
+                                                    [0, 0, 1, 2, 2, 3])):
+        _, gpu, work, _ = _draw(pixels, prims, 6, extra=[*TILES, "raster.tile_owners=2", *extra])
+        got = fragment_lanes(work, gpu, np.arange(24))
+        assert list(got.warp[np.argsort(got.keys)][::4]) == warps
+        assert lower(work, gpu).passes[0].warps == max(warps) + 1
+
+
+def test_a_warp_never_holds_two_tiles_that_share_an_edge():
+    # random small triangles: on every owner count above 1 no warp holds quads of two edge-adjacent tiles, in the
+    # run or in a sample of whole tiles (whose warps then coalesce as the run's do: no segment of one tile row
+    # is shared with a neighbour's lanes)
+    rng = np.random.default_rng(3)
+    n_tri = 400
+    prims = np.repeat(np.arange(n_tri), 12)
+    cx, cy = rng.integers(0, WIDTH - 4, n_tri), rng.integers(0, WIDTH - 3, n_tri)
+    pixels = np.concatenate([(cy[t] + np.arange(3))[:, None] * WIDTH + cx[t] + np.arange(4) for t in range(n_tri)]
+                            ).ravel()
+    tx, ty = pixels % WIDTH // 8, pixels // WIDTH // 8
+    tile = ty * (WIDTH // 8) + tx
+    kept = np.flatnonzero(np.isin(tile, [3, 4, 9, 10, 11, 27, 40, 63]))
+    for owners in (2, 3, 10):
+        _, gpu, work, _ = _draw(pixels, prims, n_tri, extra=[*TILES, f"raster.tile_owners={owners}"])
+        for lanes in (np.arange(len(pixels)), kept):
+            got = fragment_lanes(work, gpu, lanes)
+            assert sorted(got.keys) == list(lanes) and (np.diff(got.warp) >= 0).all()
+            for w in np.unique(got.warp):
+                mine = got.keys[got.warp == w]
+                assert len(np.unique(_quad_keys(pixels[mine], prims[mine]))) <= 8
+                tiles = set(zip(tx[mine], ty[mine]))
+                assert not any((a + 1, b) in tiles or (a, b + 1) in tiles for a, b in tiles)
+
+
+def _quad_keys(pixels, prims):
+    return prims * WIDTH * WIDTH + (pixels // WIDTH // 2) * WIDTH + pixels % WIDTH // 2
 
 
 def test_software_rasterizer_runs_every_submitted_triangle():

@@ -10,7 +10,8 @@ largest of
   (compute groups: the busiest lane's instructions per warp), on the busiest SM
   (warps dealt round the SMs). The warps are the pass's as lowering packs its
   lanes: a pixel shader's fragments spread over the warps of their 2x2 quads'
-  lanes (helper lanes), warps of consecutive triangles for a software
+  lanes (helper lanes; with raster.warp_packing = "tiles", warps of quads of
+  one owner's tiles), warps of consecutive triangles for a software
   rasterizer, the scoreboard's dispatch; a group on some of the lanes issues in
   every warp that holds one of them;
 * latency: each lane's dependent chain (an operation that waits for a result
@@ -64,8 +65,8 @@ import numpy as np
 from gpusim.hw.collector import collector_paused
 from gpusim.hw.core import SimtCore, flush_cycles
 from gpusim.hw.driver import pass_overhead_cycles
-from gpusim.hw.lower import (PRODUCES, _quads_so_far, _raster_positions, scoreboard_warps, submitted_triangles,
-                             thread_mapping)
+from gpusim.hw.lower import (PRODUCES, _quads_so_far, _raster_positions, fragment_warps, scoreboard_warps,
+                             submitted_triangles, thread_mapping)
 from gpusim.hw.memory import SECTOR
 from gpusim.hw.memory.coalescer import WRITE_OPS
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, per_triangle_cycles
@@ -118,6 +119,7 @@ class _QuadMemo:
     def __init__(self):
         self.seen: dict[tuple, int] = {}
         self.last: tuple = (None, None)
+        self.packed: tuple = (None, None)
 
     def quads(self, keys: np.ndarray, work) -> int:
         """How many 2x2 quads the lanes ``keys`` fill."""
@@ -125,6 +127,14 @@ class _QuadMemo:
         if fingerprint not in self.seen:
             self.seen[fingerprint] = int(self.so_far(keys, work)[-1])
         return self.seen[fingerprint]
+
+    def warps(self, keys: np.ndarray, work, gpu) -> tuple[np.ndarray, np.ndarray]:
+        """Per lane key (ascending): its warp as lowering packs a pixel shader's fragments (quads of one
+        owner's tiles, gpusim.hw.lower's ``fragment_warps``), and the quads emitted by the time its own is."""
+        fingerprint = (len(keys), int(keys[0]), int(keys[-1]), int(keys.sum()))
+        if self.packed[0] != fingerprint:
+            self.packed = (fingerprint, fragment_warps(work, gpu, keys))
+        return self.packed[1]
 
     def so_far(self, keys: np.ndarray, work) -> np.ndarray:
         """Per lane: the quads emitted by the time its own is (gpusim.hw.lower's ``_quads_so_far``)."""
@@ -439,11 +449,13 @@ def _conflict_rounds(warp: np.ndarray, cell: np.ndarray, chain: np.ndarray) -> f
 
 class _PassWarps:
     """The warps of a pass as lowering packs its lanes (``keys``: the pass's lane keys, ascending): a pixel
-    shader's fragments spread evenly over the warps of their 2x2 quads' lanes (helper lanes included), a
+    shader's fragments spread evenly over the warps of their 2x2 quads' lanes (helper lanes included; or
+    quads of one owner's tiles, ``raster.warp_packing``), a
     software rasterizer's warps of ``warp_size`` consecutive triangles (``triangles`` of them, those without a
     fragment included), the scoreboard's dispatch (``packing``), or ``warp_size`` consecutive lanes."""
 
-    def __init__(self, mapping: str, keys: np.ndarray, packing: _Packing, ws: int, triangles: int, quads, work):
+    def __init__(self, mapping: str, keys: np.ndarray, packing: _Packing, ws: int, triangles: int, quads, work,
+                 gpu):
         self.keys, self.ws, self.quads = keys, ws, 0
         self.scale = None                     # (warps, lanes): a lane's warp is its rank x warps // lanes
         self.contiguous = len(keys) > 0 and int(keys[-1]) - int(keys[0]) + 1 == len(keys)
@@ -454,10 +466,14 @@ class _PassWarps:
             self.n = int(packing.warp.max(initial=-1)) + 1
         elif mapping == "triangle":
             self.mode, self.n = "triangle", -(-triangles // ws)
-        elif mapping == "fragment" and len(keys):
+        elif mapping == "fragment" and len(keys) and gpu.raster.warp_packing == "submission":
             self.mode = "spread"
             self.n = min(len(keys), max(1, -(-4 * self.quads // ws)))
             self.scale = (self.n, len(keys))
+        elif mapping == "fragment" and len(keys):
+            self.mode = "owner"
+            self.warp, self.quads_so_far = quads.warps(keys, work, gpu)
+            self.n = int(self.warp.max()) + 1
         else:
             self.mode, self.n = "consecutive", -(-len(keys) // ws)
 
@@ -475,6 +491,8 @@ class _PassWarps:
             return self.packing.warp[np.searchsorted(self.packing.keys, keys)]
         if self.mode == "spread":
             return self.rank(keys) * self.scale[0] // self.scale[1]
+        if self.mode == "owner":
+            return self.warp[self.rank(keys)]
         return self.rank(keys) // self.ws
 
     def sum_of(self, values, keys: np.ndarray) -> np.ndarray:
@@ -486,6 +504,8 @@ class _PassWarps:
         w = self.of(keys)
         if np.ndim(values) == 0:
             return out + np.bincount(w, minlength=self.n) * float(values)
+        if self.mode == "owner":          # a warp's lanes need not be consecutive keys
+            return np.bincount(w, weights=np.asarray(values, np.float64), minlength=self.n)
         runs = run_starts(w)
         out[w[runs]] = np.add.reduceat(np.asarray(values, np.float64), runs)
         return out
@@ -497,6 +517,9 @@ class _PassWarps:
         if not len(keys):
             return out
         w = self.of(keys)
+        if self.mode == "owner":
+            np.maximum.at(out, w, values)
+            return out
         runs = run_starts(w)
         out[w[runs]] = values if np.ndim(values) == 0 else np.maximum.reduceat(values, runs)
         return out
@@ -536,12 +559,9 @@ class _ReadyMemo:
         if self.last[0] is keys and self.last[1] == memo[1:]:
             return self.last[2]
         _, position = _raster_positions(work, pk, keys)
-        quads = quad_memo.so_far(keys, work)
-        w = warps.of(keys)
-        runs = run_starts(w)
-        out = np.zeros(warps.n)
-        out[w[runs]] = np.maximum(np.maximum.reduceat(position, runs) * per_triangle_cycles(gpu),
-                                  np.maximum.reduceat(quads, runs) / gpu.raster.quads_per_cycle)
+        quads = warps.quads_so_far if warps.mode == "owner" else quad_memo.so_far(keys, work)
+        out = warps.max_of(np.maximum(position * per_triangle_cycles(gpu), quads / gpu.raster.quads_per_cycle),
+                           keys)
         out = np.maximum.accumulate(out)     # a warp with no lane of its own: when the one before it is
         self.last = (keys, memo[1:], out)
         return out
@@ -1037,7 +1057,7 @@ class _PassTimer:
         lane_keys = _lane_keys(pass_keys)
         tris = (submitted_triangles(pk, work) if pk.primitives is None else int(lane_keys.max()) + 1) \
             if triangles else 0
-        warps = _PassWarps(mapping, lane_keys, packing, ws, tris, quad_memo, work)
+        warps = _PassWarps(mapping, lane_keys, packing, ws, tris, quad_memo, work, gpu)
         warp_issue = np.zeros(warps.n)        # each warp's cycles on its SM's issue port
         # triangle threads: each fragment's cycles in its iteration of the loop, and the warps' atomic waits
         loop = np.zeros(len(work.frag_prim)) if triangles else None

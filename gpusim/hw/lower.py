@@ -10,9 +10,15 @@ A *lane* is a thread of a pass: a fragment, a pixel or a memory entry, or, with
 the ``triangle`` thread mapping, a triangle whose thread loops over its
 fragments (FreePipe, seed 000 section 3) after a :class:`Compute` instruction
 of triangle setup. A warp is ``warp_size`` consecutive lanes in submission
-order. Warps execute SIMT, group after group in program order: a group whose
-lanes issue ``count`` operations is a loop of ``max(count)`` warp instructions
-over the warp's lanes, instruction ``k`` carrying the lanes with ``count > k``
+order, except a pixel shader's: its fragments spread evenly over
+``ceil(4 x quads / warp_size)`` warps (helper lanes of partial 2x2 quads
+counted) or, with ``raster.warp_packing = "tiles"``, in the rasterizer's
+emission order (:func:`gpusim.hw.raster.emission`), dealt by screen tile to
+the tiles' owners, a warp holding up to ``warp_size / 4`` quads of one
+owner's tiles (:func:`fragment_lanes`). Warps
+execute SIMT, group after group in program order: a group whose lanes issue
+``count`` operations is a loop of ``max(count)`` warp instructions over the
+warp's lanes, instruction ``k`` carrying the lanes with ``count > k``
 (the others are masked off). With the triangle mapping, the thread's loop over
 its fragments is the outer loop: iteration ``j`` runs every group for the
 ``j``-th fragment of each lane's triangle. So a warp's instructions run in the
@@ -32,7 +38,7 @@ import numpy as np
 
 from gpusim.errors import GpusimError
 from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
-from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, quad_ids
+from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, emission, quad_ids
 from gpusim.hw.rop import framebuffer_traffic
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, interleave, mod
@@ -98,6 +104,14 @@ class Workload:
     @property
     def operations(self) -> int:
         return self.plan.total_ops()
+
+    def emission(self, tile: int, owners: int) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`gpusim.hw.raster.emission` of the fragment threads (their rasterizer emission order and their
+        tiles' owners), made once per tile size and owner count."""
+        key = f"emission{tile}x{owners}"
+        if key not in self._made:
+            self._made[key] = emission(self.frag_prim, self.frag_pixel, self.width, self.height, tile, owners)
+        return self._made[key]
 
 
 def scene_triangles(trace) -> int:
@@ -433,15 +447,24 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
         n_lanes = len(lane_keys)
         # each key's lane rank (None: the key is its rank)
         rank_of = None if n_lanes == universe and not key_lo else np.cumsum(present) - 1
-        quads = None
+        front = None                     # a pixel shader's lanes as the rasterizer feeds them (FragmentLanes)
         if any(plan.groups[pc.group].op == "scoreboard" for pc in ps):
             pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
             warp_of_lane = scoreboard_warps(pix, work.width, gpu)
-        elif mode == "fragment":
+        elif mode == "fragment" and gpu.raster.warp_packing == "submission":
             # the rasterizer emits 2x2 quads: 4 shader lanes per quad, helper lanes of partial quads included
             quads = _quads_so_far(work, lane_keys)
             n_warps = min(n_lanes, max(1, -(-4 * int(quads[-1]) // ws)))
             warp_of_lane = np.arange(n_lanes, dtype=np.int64) * n_warps // n_lanes
+            front = FragmentLanes(lane_keys, warp_of_lane, _raster_positions(work, pk, lane_keys)[1], quads)
+        elif mode == "fragment":
+            # the rasterizer's quads dealt by tile to their owners, each packing its own into warps of up to
+            # warp_size / 4 quads (4 shader lanes per quad, helper lanes of partial quads included)
+            got = fragment_lanes(work, gpu, lane_keys, pk)
+            if len(got.keys) > 1 and not bool((got.keys[1:] > got.keys[:-1]).all()):
+                rank_of = np.zeros(universe, np.int64)
+                rank_of[got.keys - key_lo] = np.arange(n_lanes)
+            lane_keys, warp_of_lane, front = got.keys, got.warp, got
         else:
             warp_of_lane = None                          # lanes fill warps in order: rank // ws, rank % ws
         if warp_of_lane is not None:
@@ -502,12 +525,13 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
             row_at[unit] = at + n
         pp = PassProgram(p, pk.name, pk.kind, None, n_lanes, warp0, operations=ops, operations_total=int(totals[p]))
         if mode == "fragment":           # the front end feeds the warps in triangle order
-            pp.triangles, position = _raster_positions(work, pk, lane_keys)
-            pp.warp_triangles = np.maximum.reduceat(position, first_lane)
-            if quads is None:
-                quads = _quads_so_far(work, lane_keys)
-            pp.quads = int(quads[-1])
-            pp.warp_quads = np.maximum.reduceat(quads, first_lane)
+            if front is None:
+                front = FragmentLanes(lane_keys, warp_of_lane, _raster_positions(work, pk, lane_keys)[1],
+                                      _quads_so_far(work, lane_keys))
+            pp.triangles = submitted_triangles(pk, work)
+            pp.warp_triangles = np.maximum.reduceat(front.position, first_lane)
+            pp.quads = int(front.quads.max())
+            pp.warp_quads = np.maximum.reduceat(front.quads, first_lane)
         pp.wi_start = np.arange(n_warps + 1) + warp0       # global warp numbers; made instruction offsets below
         passes.append(pp)
         warp0 += n_warps
@@ -701,6 +725,77 @@ def _raster_positions(work: Workload, pk, lane_keys: np.ndarray) -> tuple[int, n
     rank[np.argsort(first)] = np.arange(1, len(first) + 1)
     distinct = max(1, len(first))
     return total, -(-rank[inverse] * max(total, distinct) // distinct)
+
+
+class FragmentLanes(NamedTuple):
+    """A pixel shader's lanes as the rasterizer feeds them, in warp order (each warp's lanes in emission
+    order)."""
+
+    keys: np.ndarray               # each lane's fragment thread
+    warp: np.ndarray               # its warp (ascending)
+    position: np.ndarray | None    # the triangles rasterized by the time its own is (None: not asked for)
+    quads: np.ndarray              # the quads emitted by the time its own is (a quad counts at its first fragment)
+
+
+def fragment_lanes(work: Workload, gpu, lane_keys: np.ndarray, pk=None) -> FragmentLanes:
+    """The lanes ``lane_keys`` (ascending fragment threads) of a pixel shader's pass packed into warps.
+
+    The rasterizer emits them in :func:`gpusim.hw.raster.emission`'s order and
+    deals each quad to the owner of its tile; an owner fills a warp with up
+    to ``warp_size / 4`` of its quads in the order they come, and warps are
+    numbered by their first lane's emission. ``pk``: the pass, for the
+    triangle positions (:func:`_raster_positions`).
+    """
+    r, ws = gpu.raster, gpu.core.warp_size
+    order, owner_of, quad_of = work.emission(r.tile, r.tile_owners)
+    if len(lane_keys) == len(order):                 # every fragment thread: the emission order itself
+        emitted = order
+    else:
+        present = np.zeros(len(order), bool)
+        present[lane_keys] = True
+        emitted = order[present[order]]
+    n = len(emitted)
+    qk = quad_of[emitted]
+    new_quad = np.ones(n, bool)
+    new_quad[1:] = qk[1:] != qk[:-1]
+    quads = np.cumsum(new_quad)                      # a quad's fragments follow each other
+    position = _raster_positions(work, pk, emitted)[1] if pk is not None else None
+    if r.tile_owners > 1:                            # each owner's quads, in the order they come
+        by_owner = np.argsort(owner_of[emitted], kind="stable")
+        o = owner_of[emitted][by_owner]
+        new_owner = np.ones(n, bool)
+        new_owner[1:] = o[1:] != o[:-1]
+        new_quad = new_quad[by_owner] | new_owner
+    else:
+        by_owner, new_owner = None, np.zeros(n, bool)
+        new_owner[:1] = True
+    quad_rank = np.cumsum(new_quad) - 1
+    local = quad_rank - np.maximum.accumulate(np.where(new_owner, quad_rank, 0))    # the quad's rank at its owner
+    part = local // max(1, ws // 4)
+    new_warp = new_owner.copy()
+    new_warp[1:] |= part[1:] != part[:-1]
+    starts = np.flatnonzero(new_warp)
+    if by_owner is None:                             # one stream: the warps come in emission order
+        lanes = np.arange(n)
+    else:                                            # the owners' warps, numbered by their first emitted lanes
+        first = by_owner[starts]
+        rank = np.argsort(first, kind="stable")
+        size = np.diff(np.append(starts, n))
+        ordered = size[rank]
+        lanes = by_owner[np.repeat(starts[rank] - (np.cumsum(ordered) - ordered), ordered) + np.arange(n)]
+        size = ordered
+    warp = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, n)) if by_owner is None else size)
+    return FragmentLanes(emitted[lanes], warp, None if position is None else position[lanes], quads[lanes])
+
+
+def fragment_warps(work: Workload, gpu, lane_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fragment_lanes` per lane key (ascending): each one's warp, and the quads emitted by the time its
+    own is."""
+    got = fragment_lanes(work, gpu, lane_keys)
+    at = np.searchsorted(lane_keys, got.keys)
+    warp, quads = np.empty_like(got.warp), np.empty_like(got.quads)
+    warp[at], quads[at] = got.warp, got.quads
+    return warp, quads
 
 
 def _quads_so_far(work: Workload, lane_keys: np.ndarray) -> np.ndarray:

@@ -91,6 +91,66 @@ class RasterConfig:
     pixel_instructions: int = param(10, unit="instructions", doc="software rasterizer, per pixel of a "
                                     "triangle's bounding box: 3 edge functions, the inside test, depth "
                                     "interpolation", min=0)
+    warp_packing: Literal["submission", "tiles"] = param(
+        "submission", doc="how a pixel shader's fragments fill warps: 'submission', in the trace's order, spread "
+                          "evenly over ceil(4 x quads / warp_size) warps (helper lanes of partial quads counted), "
+                          "so a warp may cross screen-tile edges; 'tiles', as the rasterizer walks each "
+                          "triangle's tiles (Morton order inside one) and deals them to tile_owners, each packing "
+                          "warp_size / 4 quads of its own tiles into a warp")
+    tile: int = param(8, unit="pixels", doc="warp_packing = 'tiles': edge of the screen tiles the rasterizer walks (a "
+                      "power of 2): it emits a triangle's quads tile by tile, in Morton order inside a tile (the "
+                      "coarse raster's 8x8 tiles of Giesen, 'A trip through the graphics pipeline', 2011, part 6; "
+                      "ATTILA's 8x8 raster tiles)", min=2, max=256)
+    tile_owners: int = param(2, unit="owners", doc="warp_packing = 'tiles': units the screen's tiles are dealt to, "
+                             "each packing the quads "
+                             "of its own tiles into pixel-shader warps (screen-space work distribution: the TPCs, "
+                             "GPCs or quad pipelines that own the tiles); tile (x, y) goes to owner (x + y) mod "
+                             "this, so two tiles that share an edge never share a warp; 1: one stream, a warp "
+                             "takes consecutive quads whatever their tile", min=1, max=1024)
+
+    def __post_init__(self) -> None:
+        if self.tile & (self.tile - 1):
+            raise ValueError(f"tile: must be a power of 2 (the rasterizer's tiles hold whole 2x2 quads in Morton "
+                             f"order), got {self.tile}; try {1 << (self.tile.bit_length() - 1)}")
+
+
+def morton(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Morton (Z-order) index of small non-negative coordinates (below 2^16): x in the even bits, y in the odd."""
+    def spread(v):
+        v = np.asarray(v, np.int64) & 0xFFFF
+        v = (v | (v << 8)) & 0x00FF00FF
+        v = (v | (v << 4)) & 0x0F0F0F0F
+        v = (v | (v << 2)) & 0x33333333
+        return (v | (v << 1)) & 0x55555555
+    return spread(x) | (spread(y) << 1)
+
+
+def emission(prim: np.ndarray, pixel: np.ndarray, width: int, height: int, tile: int, owners: int
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fixed-function rasterizer's emission order of fragments given in submission order.
+
+    Triangles come in submission order (a run of one primitive's fragments is a
+    triangle); the rasterizer walks a triangle's tiles of ``tile`` pixels square
+    in row order and emits each tile's quads in Morton order, so a quad's
+    fragments follow each other. Returns ``(order, owner, quad)``: ``order[i]``
+    is the submission index of the ``i``-th fragment emitted; per fragment
+    ``t``, ``owner[t]`` the owner of its tile (tile ``(x, y)``: ``(x + y) mod
+    owners``, as int16) and ``quad[t]`` a key of its quad, ascending in emission
+    order (equal keys: one quad of one triangle).
+    """
+    prim = np.asarray(prim, np.int64)
+    pixel = np.asarray(pixel, np.int64)
+    n = len(prim)
+    if not n:
+        return np.zeros(0, np.int64), np.zeros(0, np.int16), np.zeros(0, np.int64)
+    x, y = pixel % width, pixel // width
+    tiles_x = -(-width // tile)
+    tx, ty = x // tile, y // tile
+    tiled = (ty * tiles_x + tx) * (tile * tile) + morton(x % tile, y % tile)
+    run = np.zeros(n, np.int64)
+    np.cumsum(prim[1:] != prim[:-1], out=run[1:])
+    key = run * (tiles_x * -(-height // tile) * tile * tile) + tiled
+    return np.argsort(key, kind="stable"), ((tx + ty) % owners).astype(np.int16), key >> 2
 
 
 def per_triangle_cycles(gpu) -> float:
