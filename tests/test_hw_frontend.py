@@ -10,7 +10,7 @@ from gpusim.hw import load_gpu
 from gpusim.hw.analytic import analytic_timing
 from gpusim.hw.lower import Workload, fragment_lanes, lower
 from gpusim.hw.machine import Machine
-from gpusim.hw.raster import bbox_pixels, emission, per_triangle_cycles
+from gpusim.hw.raster import bbox_pixels, emission, per_triangle_cycles, quad_ids
 from gpusim.opplan import OpPlan, Pass, layout_bases
 
 from test_hw_units import SIMPLE
@@ -181,13 +181,9 @@ def test_a_warp_never_holds_two_tiles_that_share_an_edge():
             assert sorted(got.keys) == list(lanes) and (np.diff(got.warp) >= 0).all()
             for w in np.unique(got.warp):
                 mine = got.keys[got.warp == w]
-                assert len(np.unique(_quad_keys(pixels[mine], prims[mine]))) <= 8
+                assert len(np.unique(quad_ids(prims[mine], pixels[mine], WIDTH, WIDTH))) <= 8
                 tiles = set(zip(tx[mine], ty[mine]))
                 assert not any((a + 1, b) in tiles or (a, b + 1) in tiles for a, b in tiles)
-
-
-def _quad_keys(pixels, prims):
-    return prims * WIDTH * WIDTH + (pixels // WIDTH // 2) * WIDTH + pixels % WIDTH // 2
 
 
 def test_software_rasterizer_runs_every_submitted_triangle():

@@ -105,9 +105,9 @@ class Workload:
     def operations(self) -> int:
         return self.plan.total_ops()
 
-    def emission(self, tile: int, owners: int) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`gpusim.hw.raster.emission` of the fragment threads (their rasterizer emission order and their
-        tiles' owners), made once per tile size and owner count."""
+    def emission(self, tile: int, owners: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:func:`gpusim.hw.raster.emission` of the fragment threads (their rasterizer emission order, their
+        tiles' owners and their quads' keys), made once per tile size and owner count."""
         key = f"emission{tile}x{owners}"
         if key not in self._made:
             self._made[key] = emission(self.frag_prim, self.frag_pixel, self.width, self.height, tile, owners)
@@ -775,16 +775,14 @@ def fragment_lanes(work: Workload, gpu, lane_keys: np.ndarray, pk=None) -> Fragm
     new_warp = new_owner.copy()
     new_warp[1:] |= part[1:] != part[:-1]
     starts = np.flatnonzero(new_warp)
+    size = np.diff(np.append(starts, n))
     if by_owner is None:                             # one stream: the warps come in emission order
         lanes = np.arange(n)
     else:                                            # the owners' warps, numbered by their first emitted lanes
-        first = by_owner[starts]
-        rank = np.argsort(first, kind="stable")
-        size = np.diff(np.append(starts, n))
-        ordered = size[rank]
-        lanes = by_owner[np.repeat(starts[rank] - (np.cumsum(ordered) - ordered), ordered) + np.arange(n)]
-        size = ordered
-    warp = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, n)) if by_owner is None else size)
+        rank = np.argsort(by_owner[starts], kind="stable")
+        size = size[rank]
+        lanes = by_owner[np.repeat(starts[rank] - (np.cumsum(size) - size), size) + np.arange(n)]
+    warp = np.repeat(np.arange(len(starts)), size)
     return FragmentLanes(emitted[lanes], warp, None if position is None else position[lanes], quads[lanes])
 
 
