@@ -108,7 +108,7 @@ def test_a_run_whose_operations_grow_with_passes_is_refused():
     ("depth-peeling", {}),                            # seq_pass groups over 20 peels
     ("dual-depth-peeling", {}),
     ("kbuffer", {"k": 8}),                            # RMW hazards in the replicates
-    ("kbuffer", {"k": 8, "order": "centroid", "batch": 16}),   # a pass per batch, flush passes
+    ("kbuffer", {"k": 8, "order": "centroid", "batch": 64}),   # a pass per batch, flush passes
 ])
 def test_a_sampled_run_over_max_operations_is_sampled_a_chunk_at_a_time(small, scheme, params):
     """The sampled level takes what the full level streams: each replicate's sample of each chunk of passes,
