@@ -82,7 +82,7 @@ def main(argv=None) -> int:
             try:
                 records[level] = run_timing(result, trace, level, gpu, reference)[0]
             except GpusimError as exc:        # a run over runner.max_operations: the row says so
-                records = {"error": str(exc).split(":")[0]}
+                records = {"error": str(exc).split(" (")[0]}
                 break
         line = ("| " + " | ".join(row(scheme, records["full"], records["sampled"])) + " |" if "error" not in records
                 else f"| {scheme} | {records['error']} |" + " |" * (len(head) - 2))
