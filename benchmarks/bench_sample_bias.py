@@ -12,8 +12,8 @@ about as much as the cycles points at the sample's own work (how its warps coale
 it misses). The last columns give the replicates' SMs and the speed-up over full. docs/timing-model.md
 ("The sampled level") quotes the figures this gives on foliage at 384x384.
 
-Each run is in this process, one after the other (``runner.workers = 1``): the full level of every
-scheme on 1.7M fragments takes about 10 minutes of one core.
+Each run is in this process, one after the other (``runner.workers = 1``): both levels of every
+scheme on foliage's 1.7M fragments took 22 minutes of one core on the 2-core reference machine.
 """
 
 from __future__ import annotations
