@@ -351,7 +351,8 @@ def test_a_killed_sweep_resumes_to_the_same_table(tmp_path, sig):
     assert proc.poll() is None, "the sweep ended before it could be killed; make it longer"
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == (-signal.SIGKILL if sig == signal.SIGKILL else 130)
+    assert proc.returncode == (-signal.SIGKILL if sig == signal.SIGKILL else 130), \
+        f"exit {proc.returncode} with {_finished(out)} runs finished; stderr: {err.decode()[-1500:]}"
     if sig == signal.SIGTERM:
         assert b"run the same command again to resume" in err
     done = _finished(out)
