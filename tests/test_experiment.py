@@ -344,13 +344,20 @@ def test_a_killed_sweep_resumes_to_the_same_table(tmp_path, sig):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "gpusim", "run", str(path), "-o", str(out), "--workers", "2", "--quiet",
            "--no-report"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+                            env=dict(os.environ, PYTHONFAULTHANDLER="1"))     # SIGABRT dumps every thread
     deadline = time.monotonic() + 120
     while _finished(out) < 3 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
     assert proc.poll() is None, "the sweep ended before it could be killed; make it longer"
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:          # it went on after the signal: say where each thread was
+        proc.send_signal(signal.SIGABRT)
+        _, err = proc.communicate(timeout=60)
+        pytest.fail(f"the sweep did not stop within 60 s of the signal ({_finished(out)} runs finished); "
+                    f"its threads: {err.decode()[-4000:]}")
     assert proc.returncode == (-signal.SIGKILL if sig == signal.SIGKILL else 130), \
         f"exit {proc.returncode} with {_finished(out)} runs finished; stderr: {err.decode()[-1500:]}"
     if sig == signal.SIGTERM:
