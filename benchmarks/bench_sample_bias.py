@@ -84,6 +84,25 @@ def dram_load(record: dict, mode: str | None):
         DramChannel.prepare = prepare
 
 
+def compare(result, trace, gpu, reference) -> dict:
+    """The timing records of one scheme's ``result``: "full", "sampled" and, where the oracle applies,
+    "exact" (the sample with the run's DRAM bytes, :func:`dram_load`); or {"error": ...} for a run
+    over ``runner.max_operations``."""
+    records, load = {}, {}
+    for level, mode in (("full", "record"), ("sampled", None), ("exact", "exact")):
+        if mode == "exact" and ("l2" in records["full"]["units"] or "dram" not in records["full"]["units"]):
+            break                         # the L2 shares the factor; or no DRAM traffic to set
+        try:
+            with dram_load(load, mode):
+                records[level] = run_timing(result, trace, "full" if level == "full" else "sampled", gpu,
+                                            reference)[0]
+        except GpusimError as exc:
+            if mode == "exact":           # a run streamed in chunks: no oracle, a dash
+                break
+            return {"error": str(exc).split(" (")[0]}          # a run over runner.max_operations
+    return records
+
+
 def ratio(sampled, full) -> str:
     """``sampled / full`` to three places; a dash where either is missing or the full figure is 0."""
     if sampled is None or full is None or not full:
@@ -125,19 +144,7 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     for scheme in schemes:
         result, _, reference = run_functional(trace, scheme, {})
-        records, load = {}, {}
-        for level, mode in (("full", "record"), ("sampled", None), ("exact", "exact")):
-            if mode == "exact" and ("l2" in records["full"]["units"] or "dram" not in records["full"]["units"]):
-                break                         # the L2 shares the factor; or no DRAM traffic to set
-            try:
-                with dram_load(load, mode):
-                    records[level] = run_timing(result, trace, "full" if level == "full" else "sampled", gpu,
-                                                reference)[0]
-            except GpusimError as exc:
-                if mode == "exact":           # a run streamed in chunks: no oracle, a dash
-                    break
-                records = {"error": str(exc).split(" (")[0]}      # a run over runner.max_operations
-                break
+        records = compare(result, trace, gpu, reference)
         line = ("| " + " | ".join(row(scheme, records["full"], records["sampled"], records.get("exact")))
                 + " |" if "error" not in records
                 else f"| {scheme} | {records['error']} |" + " |" * (len(head) - 2))

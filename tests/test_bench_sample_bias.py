@@ -43,17 +43,14 @@ def test_a_ratio_without_a_full_figure_is_a_dash():
 
 def test_the_oracle_gives_the_sample_the_runs_dram_busy_time():
     from gpusim.hw import load_gpu
-    from gpusim.replay import run_functional, run_timing
+    from gpusim.replay import run_functional
     from gpusim.scene import load_scene, trace_scene
     bench = _bench()
     trace = trace_scene(*load_scene("default", ["screen.width=64", "screen.height=64"]), progress=False)
     gpu = load_gpu("gtx280", ["runner.workers=1", "sample.min_tiles=1"])
     result, _, reference = run_functional(trace, "tfss", {})
-    load, busy = {}, {}
-    for level, mode in (("full", "record"), ("sampled", None), ("exact", "exact")):
-        with bench.dram_load(load, mode):
-            rec = run_timing(result, trace, "full" if level == "full" else "sampled", gpu, reference)[0]
-        busy[level] = float(rec["units"]["dram"]["busy_cycles"])
+    records = bench.compare(result, trace, gpu, reference)
+    busy = {level: float(rec["units"]["dram"]["busy_cycles"]) for level, rec in records.items()}
     # here the sample's DRAM is 11% busier than the run's; with the run's bytes, its four replicates' estimate
     # is 1.2% off (on foliage at 384x384 TFSS: 2 cycles in 22 million)
     assert abs(busy["sampled"] - busy["full"]) > 0.05 * busy["full"]
