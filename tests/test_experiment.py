@@ -380,6 +380,36 @@ def test_a_killed_sweep_resumes_to_the_same_table(tmp_path, sig):
                     and str(os.getpid()) not in line]
 
 
+def test_a_stop_lost_in_a_finalizer_still_stops_the_sweep(tmp_path, monkeypatch, capsys):
+    """A SIGTERM handled while Python runs a finalizer loses its KeyboardInterrupt ("Exception ignored");
+    the recorded stop still ends the sweep after that task, with exit 130 and the finished runs kept."""
+    import gpusim.experiment.executors as executors
+    path = write(tmp_path / "e.toml", SMALL)
+    real, calls = executors.execute, []
+
+    class SignalledInFinalizer:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(10_000):          # the handler runs here, in __del__: its exception is lost
+                pass
+
+    def execute(task, trace, reference):
+        calls.append(task)
+        if len(calls) == 2:
+            SignalledInFinalizer()           # collected at once
+        return real(task, trace, reference)
+
+    lost = []
+    monkeypatch.setattr(executors, "execute", execute)
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: lost.append(u.exc_type))
+    rc = main(["run", str(path), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet", "--no-report"])
+    err = capsys.readouterr().err
+    assert lost == [KeyboardInterrupt], f"the interrupt was not lost ({lost}): the test tests nothing"
+    assert rc == 130 and len(calls) == 2, (rc, len(calls))
+    assert "run the same command again to resume" in err
+    assert _finished(tmp_path / "out") >= 1
+
+
 # ------------------------------------------------------------------------------------------------ dask
 def test_dask_cluster_gives_the_same_table(small_run, tmp_path):
     distributed = pytest.importorskip("distributed")

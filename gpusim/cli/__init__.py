@@ -7,7 +7,7 @@ import signal
 import sys
 import threading
 
-from gpusim import __version__
+from gpusim import __version__, interrupt
 from gpusim.cli import (config_cmd, info_cmd, replay_cmd, report_cmd, run_cmd, schemes_cmd, show_cmd,
                         trace_cmd)
 from gpusim.cli.common import Parser
@@ -31,9 +31,12 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help(sys.stderr)
         return 2
-    previous = None
+    previous = {}
+    interrupt.clear()
     if threading.current_thread() is threading.main_thread():      # SIGTERM stops a command like Ctrl-C: the
-        previous = signal.signal(signal.SIGTERM, _terminate)       # half-written outputs are removed
+        previous = {sig: signal.signal(sig, interrupt.handle)      # half-written outputs are removed; the stop
+                    for sig in (signal.SIGINT, signal.SIGTERM)     # is recorded, so a lost one still stops;
+                    if signal.getsignal(sig) is not signal.SIG_IGN}   # a signal ignored by the caller stays so
     try:
         return args.run(args)
     except GpusimError as exc:
@@ -56,12 +59,9 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-
-
-def _terminate(signum, frame):
-    raise KeyboardInterrupt
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        interrupt.clear()
 
 
 if __name__ == "__main__":

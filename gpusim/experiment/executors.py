@@ -18,8 +18,12 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Iterator
 
+from gpusim import interrupt
 from gpusim.errors import GpusimError
 from gpusim.experiment.execute import Outcome, Task, execute
+
+
+STOP_POLL_S = 0.5       # s; how often a sweep waiting on its workers looks for a stop request
 
 
 def _worker_init(parent: int) -> None:
@@ -66,7 +70,8 @@ class LocalExecutor:
         finally:
             signal.signal(signal.SIGINT, previous)
         while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done, _ = wait(pending, timeout=STOP_POLL_S, return_when=FIRST_COMPLETED)
+            interrupt.check()                # a SIGTERM whose KeyboardInterrupt was lost still stops the sweep
             for future in done:
                 task = pending.pop(future)
                 try:
@@ -127,6 +132,7 @@ class DaskExecutor:
             trace, reference = self.remote[task.trace_path]
             futures[self.client.submit(execute, task, trace, reference, pure=False)] = task
         for future in as_completed(list(futures)):
+            interrupt.check()
             yield futures[future], future.result()
 
     def close(self) -> None:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gpusim import interrupt
 from gpusim.errors import GpusimError
 from gpusim.experiment.execute import Outcome, Task, TaskRun
 from gpusim.experiment.executors import make_executor, probe
@@ -195,6 +196,7 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
             summary.computed += len(task_outcomes)
             bar.update(len(task_outcomes))
             bar.set_postfix(failed=failed, refresh=False)
+            interrupt.check()                    # a stop whose KeyboardInterrupt was lost (gpusim.interrupt)
             if time.monotonic() - last > 1.0:
                 tables()
                 last = time.monotonic()
@@ -203,6 +205,7 @@ def run_experiment(exp: Experiment, out: str | Path, workers: int | None = None,
         if executor is not None:
             executor.close()
         tables()
+    interrupt.check()                            # a stop lost in the last task or the tables: no report follows
     for r, i in zip(runs, ids):
         o = outcomes.get(i)
         if r.skip is not None:
