@@ -52,6 +52,11 @@ def _stats() -> pd.DataFrame:
             rows += [(f"{run}-sampled", "sample", key, "", value)
                      for key, value in (("replicates", 4), ("sms", 1), ("share", 1 / 30), ("tiles", 64),
                                         ("tiles_per_replicate", 2))]
+    # an L2 on the big z-buffer's runs: the sample's is half again as busy and hits 95% against 90%
+    rows += [("big-zbuffer-full", "memory.l2", stat, f"instance={i}", value) for i in range(2)
+             for stat, value in (("busy_cycles", 100.0), ("hits", 90.0), ("misses", 10.0))]
+    rows += [("big-zbuffer-sampled", "l2", stat, "", value)
+             for stat, value in (("busy_cycles", 300.0), ("hits", 190.0), ("misses", 10.0))]
     return pd.DataFrame(rows, columns=["run", "unit", "stat", "labels", "value"])
 
 
@@ -106,13 +111,18 @@ def test_misses_say_what_decided_them(errors):
     assert misses.loc[("analytic", "big gtx280", "kbuffer"), "decided by"] == "latency 90%, dram 10%"
     sampled = misses.loc[("sampled", "big gtx280", "zbuffer")]
     assert sampled["missed"] == "error and interval" and "4 x 1 SM" in sampled["decided by"]
+    # the units furthest from the full run's busy cycles (over 5%), the furthest first, and the L2's hit rates
+    assert sampled["decided by"].endswith("; busy against full: l2 +50%; L2 hits 95.0% (full 90.0%)")
 
 
 def test_busy_errors_sum_the_full_levels_instances(errors):
     busy = busy_errors(errors, _stats())
-    assert set(busy["unit"]) == {"dram"} and len(busy) == 8
-    assert busy[busy["fidelity"] == "sampled"]["busy_error"].tolist() == pytest.approx([0.05] * 4)
-    assert busy[busy["fidelity"] == "analytic"]["busy_error"].tolist() == pytest.approx([-0.1] * 4)
+    dram = busy[busy["unit"] == "dram"]
+    assert set(busy["unit"]) == {"dram", "l2"} and len(dram) == 8
+    assert dram[dram["fidelity"] == "sampled"]["busy_error"].tolist() == pytest.approx([0.05] * 4)
+    assert dram[dram["fidelity"] == "analytic"]["busy_error"].tolist() == pytest.approx([-0.1] * 4)
+    l2 = busy[busy["unit"] == "l2"].set_index("fidelity")["busy_error"]
+    assert l2["sampled"] == pytest.approx(0.5) and math.isnan(l2["analytic"])      # the analytic level has none
 
 
 @pytest.fixture(scope="module")

@@ -20,11 +20,11 @@ from gpusim.atomic_io import atomic_folder, write_text_atomic
 from gpusim.errors import GpusimError
 from gpusim.report import figures
 from gpusim.report.check import check_tables
-from gpusim.report.tables import (CASE_ERROR_BOUND, FAST_CASE_FRAGMENTS, MISORDER_STATS, best_level, busy_errors,
-                                  drop_cases, drop_summary, error_percentiles, fast_cases, fidelity_errors,
-                                  fidelity_misses, fidelity_summary, fidelity_targets, fmt, markdown, most_faithful,
-                                  one_per_functional, per_fragment, scene_sweeps, structure_table, unit_utilisation,
-                                  whole_samples, with_labels)
+from gpusim.report.tables import (CASE_ERROR_BOUND, FAST_CASE_FRAGMENTS, MISS_UNITS, MISORDER_STATS, UNIT_SHIFT,
+                                  best_level, busy_errors, drop_cases, drop_summary, error_percentiles, fast_cases,
+                                  fidelity_errors, fidelity_misses, fidelity_summary, fidelity_targets, fmt, markdown,
+                                  most_faithful, one_per_functional, per_fragment, scene_sweeps, structure_table,
+                                  unit_utilisation, whole_samples, with_labels)
 from gpusim.text import counted
 
 IMAGES_PER_FIGURE = 11
@@ -320,7 +320,10 @@ class _Report:
         self.add("#### Cases that miss", "", f"{len(misses)} cases miss their level's error bound (|cycle error| "
                  f"over {', '.join(f'{b:.0%} for {lv}' for lv, b in CASE_ERROR_BOUND.items())}) or, for sampled, "
                  "have the full level's cycles outside their interval; with what decided each: the analytic "
-                 "level's bounds (their share of its cycles), the sampled level's sample and error estimate.", "")
+                 "level's bounds (their share of its cycles); the sampled level's sample, its error estimate, the "
+                 f"units whose busy cycles are more than {UNIT_SHIFT:.0%} off the full run's (at most "
+                 f"{MISS_UNITS}, the furthest first) and, on a GPU with an L2, its hit rate beside the full "
+                 "run's.", "")
         if len(misses):
             self.add("<details><summary>cases</summary>", "", markdown(misses, {"cycle_error": "pct"}), "",
                      "</details>", "")

@@ -98,6 +98,9 @@ FIDELITY_TARGETS = (("sampled", "median abs. cycle error", 0.02, "<="), ("sample
 FAST_CASE_FRAGMENTS = 1_000_000
 #: the largest |cycle error| a case may have to meet its level's error target (the max targets above)
 CASE_ERROR_BOUND = {"sampled": 0.05, "analytic": 0.10}
+#: a unit class whose busy cycles in a sampled run that misses are off the full run's by more than this (a
+#: share) is named among what the miss came from, the largest first, at most :data:`MISS_UNITS` of them
+UNIT_SHIFT, MISS_UNITS = 0.05, 2
 ERROR_COLUMNS = ["run", "setting", "config", "scheme", "fidelity", "fragments", "cycles", "full_cycles",
                  "cycle_error", "wall_seconds", "full_wall_seconds", "speedup", "ci_low", "ci_high", "error_estimate",
                  "inside", "hazards", "full_hazards", "full_run"]
@@ -234,16 +237,26 @@ def whole_samples(stats: pd.DataFrame) -> set[str]:
 def fidelity_misses(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFrame:
     """The cases that miss their level's error target (|cycle error| over :data:`CASE_ERROR_BOUND`) or, for a
     sampled run, whose 95% interval leaves out the full level's cycles; with what decided the case: the
-    analytic level's bounds, the sampled level's sample and its own error estimate."""
+    analytic level's bounds; the sampled level's sample, its own error estimate, the units whose busy cycles
+    are furthest from the full run's (:data:`UNIT_SHIFT`) and, with an L2, its hit rate and the full run's."""
     bounds, samples = decided_by(stats), sample_sizes(stats)
+    busy, hits = unit_errors(errors, stats), l2_hit_rates(stats)
     rows = []
     for _, e in errors.iterrows():
         over = abs(e["cycle_error"]) > CASE_ERROR_BOUND.get(e["fidelity"], math.inf)
         outside = e["inside"] is False or e["inside"] == 0
         if not (over or outside):
             continue
-        why = (bounds.get(e["run"], "-") if e["fidelity"] == "analytic"
-               else f"{samples.get(e['run'], '-')}; error estimate {fmt(e['error_estimate'], 'share')}")
+        if e["fidelity"] == "analytic":
+            why = bounds.get(e["run"], "-")
+        else:
+            why = f"{samples.get(e['run'], '-')}; error estimate {fmt(e['error_estimate'], 'share')}"
+            shifted = sorted(((u, v) for u, v in busy.get(e["run"], {}).items() if round(abs(v), 3) > UNIT_SHIFT),
+                             key=lambda uv: -abs(uv[1]))[:MISS_UNITS]
+            if shifted:
+                why += "; busy against full: " + ", ".join(f"{u} {v:+.0%}" for u, v in shifted)
+            if e["run"] in hits and e["full_run"] in hits:
+                why += f"; L2 hits {hits[e['run']]:.1%} (full {hits[e['full_run']]:.1%})"
         rows.append({"fidelity": e["fidelity"], "setting": e["setting"], "config": e["config"],
                      "cycle_error": e["cycle_error"],
                      "missed": " and ".join(m for m, hit in (("error", over), ("interval", outside)) if hit),
@@ -251,20 +264,43 @@ def fidelity_misses(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["fidelity", "setting", "config", "cycle_error", "missed", "decided by"])
 
 
+def _unit_sums(stats: pd.DataFrame, stat: str) -> pd.Series:
+    """``stat`` per run and unit class (the unit's last name: ``memory.dram`` and ``dram`` alike), summed over
+    its instances (the full level's per-instance rows, the others' one row)."""
+    sel = stats[stats["stat"] == stat]
+    return sel.assign(name=sel["unit"].str.split(".").str[-1]).groupby(["run", "name"], sort=False)["value"].sum()
+
+
+def unit_errors(errors: pd.DataFrame, stats: pd.DataFrame) -> dict[str, dict[str, float]]:
+    """Per compared run: per unit class the full run keeps busy, the run's busy cycles against the full run's
+    (a relative error; NaN where the run has none)."""
+    busy = _unit_sums(stats, "busy_cycles")
+    runs = set(busy.index.get_level_values(0))
+    out = {}
+    for _, e in errors.iterrows():
+        if e["full_run"] in runs:
+            out[e["run"]] = {unit: busy.get((e["run"], unit), math.nan) / full - 1.0
+                             for unit, full in busy.loc[e["full_run"]].items() if full > 0}
+    return out
+
+
+def l2_hit_rates(stats: pd.DataFrame) -> dict[str, float]:
+    """Per run with L2 requests: the share of them that hit."""
+    hits, misses = _unit_sums(stats, "hits"), _unit_sums(stats, "misses")
+    out = {}
+    for (run, unit), h in hits.items():
+        total = h + misses.get((run, unit), 0.0)
+        if unit == "l2" and total > 0:
+            out[run] = h / total
+    return out
+
+
 def busy_errors(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFrame:
     """Per compared run and hardware unit class: the level's busy cycles (summed over the unit's instances)
     against the full run's, as a relative error; units the full run keeps busy only."""
-    busy = stats[stats["stat"] == "busy_cycles"]
-    busy = busy.assign(name=busy["unit"].str.split(".").str[-1]).groupby(["run", "name"], sort=False)["value"].sum()
-    rows = []
-    for _, e in errors.iterrows():
-        if e["full_run"] not in busy.index.get_level_values(0):
-            continue
-        for unit, full in busy.loc[e["full_run"]].items():
-            mine = busy.get((e["run"], unit), math.nan)
-            if full > 0:
-                rows.append({"fidelity": e["fidelity"], "scheme": e["scheme"], "unit": unit,
-                             "busy_error": mine / full - 1.0})
+    by_run = unit_errors(errors, stats)
+    rows = [{"fidelity": e["fidelity"], "scheme": e["scheme"], "unit": unit, "busy_error": err}
+            for _, e in errors.iterrows() for unit, err in by_run.get(e["run"], {}).items()]
     return pd.DataFrame(rows, columns=["fidelity", "scheme", "unit", "busy_error"])
 
 
