@@ -90,9 +90,37 @@ def test_exact_when_every_fragment_has_a_bucket_of_its_own():
     t = make_trace(xy % 24, xy // 24, rng.random(n), rng.random((n, 4)), rng.random(n) < 0.2, width=24, height=16)
     for name, params in [("bucket-depth-peeling", {}), ("bucket-depth-peeling", {"passes": 2}),
                          ("adaptive-bucket-depth-peeling", {})]:
-        res = run(name, t, **params)
+        res = run(name, t, bounds="geometry", **params)
         assert res.dropped_fragments == 0, name
         assert_exact(res, t)
+        # on the scene's range (the box), some pixel's two depths share one of the 32 buckets
+        assert run(name, t, **params).dropped_fragments > 0, name
+
+
+def test_the_box_range_is_the_scenes_over_its_rectangle_and_costs_no_scene_pass():
+    # fragments at (1, 1) z 0.2 and 0.3, (3, 2) z 0.6 and 0.9 on a 5x4 screen: the box covers x 1-3, y 1-2
+    t = make_trace(np.array([1, 1, 3, 3]), np.array([1, 1, 2, 2]), np.array([0.3, 0.2, 0.9, 0.6]), RGBA[:4],
+                   width=5, height=4)
+    box, own = run("bucket-depth-peeling", t), run("bucket-depth-peeling", t, bounds="geometry")
+    # in the scene's range [0.2, 0.9] the buckets are floor(32 (z - 0.2) / 0.7): 4, 0, 31, 18, all distinct
+    assert box.dropped_fragments == own.dropped_fragments == 0
+    assert_exact(box, t)
+    assert (box.geometry_passes, own.geometry_passes) == (1, 2)
+    assert box.params["bounds"] == "box"
+    bounds = box.passes[1]
+    assert (bounds.name, bounds.kind, bounds.threads) == ("bounds", "fullscreen", "pixel")
+    # the box's front and back faces blend at each of its 3 x 2 pixels; the scene pass blends each fragment
+    assert box.accesses["depth_range"]["blend"] == 2 * 6 and own.accesses["depth_range"]["blend"] == 4
+    assert next(s for s in box.structures if s.name == "depth_range").used_entries == 6
+    stream = box.opstream()
+    blends = (stream.op == OPS.index("blend")) & (stream.pass_index == 1)
+    pixels = sorted(set((stream.address[blends] - stream.address[blends].min()).tolist()))
+    assert len(pixels) == 6
+    for name, params, passes in [("bucket-depth-peeling", {"passes": 2}, (2, 3)),
+                                 ("adaptive-bucket-depth-peeling", {}, (2, 3))]:
+        got = (run(name, t, **params).geometry_passes, run(name, t, bounds="geometry", **params).geometry_passes)
+        assert got == passes, name
+    assert run("bucket-depth-peeling", FragmentTrace.empty(4, 4)).accesses["depth_range"].get("blend", 0) == 0
 
 
 def test_two_passes_halve_the_range_over_64_buckets():
@@ -101,11 +129,11 @@ def test_two_passes_halve_the_range_over_64_buckets():
     one, two = run("bucket-depth-peeling", t), run("bucket-depth-peeling", t, passes=2)
     assert one.dropped_fragments == 1 and two.dropped_fragments == 0
     assert_exact(two, t)
-    assert (one.geometry_passes, two.geometry_passes) == (2, 3)
+    assert (one.geometry_passes, two.geometry_passes) == (1, 2)
     assert [p.name for p in two.passes] == ["clear", "bounds", "capture 0", "capture 1", "composite"]
     # every fragment loads the range in both capture passes; only those of a pass's half blend its 8 targets
     acc = two.accesses
-    assert acc["depth_range"] == {"store": 1, "blend": 4, "load": 8}
+    assert acc["depth_range"] == {"store": 1, "blend": 2, "load": 8}      # the box: front and back face
     assert acc["buckets"] == {"store": 16, "blend": 4 * 8, "load": 16}
     stream = two.opstream()
     on_buckets = (stream.op == OPS.index("blend")) & (stream.structure == stream.structures.index("buckets"))

@@ -193,6 +193,17 @@ def test_seed000_every_pair_within_1_5x_and_the_order():
     assert rows[("000 Table 3, Dragon", "K-buffer / ABS frame rate")].note.startswith("within 1.5x")
 
 
+def test_seed000_bucket_methods_geometry_passes_are_the_texts():
+    """Table 3 prints no pass count for BDP, BDP2 and ADP; its caption and section 5.1 give 1, 2 and 2."""
+    results = seed000_results()
+    results["geometry_passes"] = results["variant"].map({"bdp": 1, "bdp2": 2, "adp": 3})
+    rows = by_key(paper000.compare(results, NO_STATS))
+    for method, ours in (("BDP", 1), ("BDP2", 2), ("ADP", 3)):
+        row = rows[("000 Table 3 caption / §5.1, Dragon", f"{method} geometry passes")]
+        assert (row.paper, row.ours) == (paper000.TEXT_PASSES[method], ours)
+        assert row.note.startswith("[derived]")
+
+
 def test_seed000_misses_when_methods_are_three_times_too_fast():
     # one method of ten 3x too fast misses 45 of 225 pairs, within the 80% target: two miss it
     one = by_key(paper000.compare(seed000_results({"DP": 3.0}), NO_STATS))

@@ -88,6 +88,7 @@ class Spec:
     z-buffer (LESS) hides a transparent fragment at exactly an opaque fragment's depth
     whatever the submission order. ``blend_rounding``: the frame buffer is rounded to 8
     bits after every blend. ``exact``: the docs call it exact / order-independent.
+    ``params``: the scheme parameters these properties run it with (its defaults otherwise).
     """
 
     fmt: str | None = None
@@ -98,6 +99,7 @@ class Spec:
     opaque_first: bool = False
     blend_rounding: bool = False
     exact: bool = True
+    params: tuple = ()
 
 
 def _param(name, key):
@@ -114,10 +116,11 @@ SPECS = {
     "kbuffer": Spec("rgba32f", capacity="nearest", limit=_param("kbuffer", "k")),
     # "peel": the k nearest per pass behind the previous pass's farthest (exact on distinct depths)
     "multipass-kbuffer": Spec("rgba32f", capacity="peel", limit=_param("multipass-kbuffer", "k")),
-    # "bucket": one fragment per depth bucket, the farthest; exact while a pixel has at most 2 distinct depths
-    # (its near and far: buckets 0 and 31)
-    "bucket-depth-peeling": Spec(None, capacity="bucket", limit=2),
-    "adaptive-bucket-depth-peeling": Spec(None, capacity="bucket", limit=2),
+    # "bucket": one fragment per depth bucket, the farthest; on each pixel's own range (bounds = geometry)
+    # exact while a pixel has at most 2 distinct depths (its near and far: buckets 0 and 31); the default
+    # range, the scene's box, has its own test below
+    "bucket-depth-peeling": Spec(None, capacity="bucket", limit=2, params=(("bounds", "geometry"),)),
+    "adaptive-bucket-depth-peeling": Spec(None, capacity="bucket", limit=2, params=(("bounds", "geometry"),)),
     "linked-list": Spec("rgba8", capacity="pool", limit=_param("linked-list", "pool_nodes_per_pixel"),
                         ties="reverse"),
     "lucidraster": Spec(None, capacity="filter", limit=_param("lucidraster", "depth_filter")),
@@ -164,7 +167,7 @@ def test_bugs_these_properties_found_stay_fixed():
 
 
 def run(name, trace):
-    return make_scheme(name).run(trace)
+    return make_scheme(name, dict(SPECS[name].params)).run(trace)
 
 
 # ---------------------------------------------------------------------- strategies
@@ -335,16 +338,18 @@ def documented_order(name, trace) -> np.ndarray:
     return sel[np.lexsort((tiebreak[sel], opaque_rank[sel], key[sel], pix[sel]))]
 
 
-def bucket_kept(name, trace) -> np.ndarray:
-    """Bucket depth peeling's kept fragments (docs/schemes.md): each pixel's range [near, far] split into 32
-    uniform buckets (the adaptive scheme: 512 uniform bins, the r-th of O occupied bins in bucket r, or
-    floor(32 r / O) past 32), float32 arithmetic; per bucket the farthest, of equal depths the first
-    submitted."""
+def bucket_kept(name, trace, box=False) -> np.ndarray:
+    """Bucket depth peeling's kept fragments (docs/schemes.md): each pixel's range [near, far] (``box``: the
+    scene's, its least and greatest depth, at every pixel) split into 32 uniform buckets (the adaptive scheme:
+    512 uniform bins, the r-th of O occupied bins in bucket r, or floor(32 r / O) past 32), float32
+    arithmetic; per bucket the farthest, of equal depths the first submitted."""
     pix, z, n = trace.pixel_ids(), trace.z.astype(np.float32), len(trace)
     near = np.full(trace.pixel_count, np.inf, np.float32)
     far = np.full(trace.pixel_count, -np.inf, np.float32)
     np.minimum.at(near, pix, z)
     np.maximum.at(far, pix, z)
+    if box and n:
+        near[:], far[:] = z.min(), z.max()
     span = (far - near)[pix]
     t = np.zeros(n, np.float32)
     np.divide(z - near[pix], span, out=t, where=span > 0)
@@ -474,7 +479,7 @@ def has_ties(trace) -> bool:
 @SETTINGS
 @given(trace=traces())
 def test_runs_are_deterministic_finite_and_count_drops_as_documented(name, trace):
-    res, again = run(name, trace), make_scheme(name).run(trace)
+    res, again = run(name, trace), run(name, trace)
     assert np.array_equal(res.image, again.image)
     assert res.accesses == again.accesses and res.footprint == again.footprint
     assert (res.dropped_fragments, res.overflowed_pixels) == (again.dropped_fragments, again.overflowed_pixels)
@@ -485,6 +490,20 @@ def test_runs_are_deterministic_finite_and_count_drops_as_documented(name, trace
     assert (res.dropped_fragments, res.overflowed_pixels) == documented_drops(name, trace)
     if SPECS[name].ties == "first-only":            # depth peeling: tie losses are its dropped fragments
         assert res.stats["tie_losses"].value == res.dropped_fragments
+
+
+@pytest.mark.parametrize("name", sorted(RANGE_BUCKETS))
+@SETTINGS
+@given(trace=traces())
+def test_bucket_schemes_on_the_scenes_box_drop_as_documented(name, trace):
+    """The default range, the scene's bounding box: every pixel's buckets span the scene's depths."""
+    res = make_scheme(name).run(trace)
+    assert res.params["bounds"] == "box"
+    keep = bucket_kept(name, trace, box=True)
+    pix = trace.pixel_ids()
+    assert (res.dropped_fragments, res.overflowed_pixels) == (len(trace) - int(keep.sum()),
+                                                              len(np.unique(pix[~keep])))
+    assert sorted(res.lists.fragment.tolist()) == np.flatnonzero(keep).tolist()
 
 
 # stats that are not counts: shares, means

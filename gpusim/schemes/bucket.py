@@ -2,8 +2,11 @@
 bucket sort", HPG 2009; seed 000 Table 3's BDP, BDP2 and ADP).
 
 Both capture the layers of a pixel into a *bucket array*: ``BUCKETS`` = 32 buckets of one 32-bit depth each,
-8 RGBA32F render targets (MRTs) of 4 channels. A first geometry pass (``bounds``) MAX-blends (-z, z) into
-``depth_range`` (RG32F) to find each pixel's depth range [near, far]. In a capture pass each fragment loads
+8 RGBA32F render targets (MRTs) of 4 channels. A first pass (``bounds``) MAX-blends (-z, z) into
+``depth_range`` (RG32F) to find each pixel's depth range [near, far]: with ``bounds = "box"`` (the paper's,
+the default) it draws the scene's bounding box, so the range is the scene's at every pixel and the capture is
+the method's single geometry pass; with ``bounds = "geometry"`` it is a geometry pass of the whole scene, each
+pixel its own range (fewer collisions, one geometry pass more). In a capture pass each fragment loads
 its pixel's range, computes its bucket, and writes its depth to that bucket's channel and the empty value to
 the 31 others; MAX blending merges the 8 targets, so a bucket keeps the farthest depth routed to it. Two
 fragments in one bucket collide: the nearer is lost (``bucket_collisions``, the ``dropped_fragments``; the
@@ -31,7 +34,10 @@ What the paper leaves open, read here (docs/schemes.md):
   its 32 MB is the depth channels alone); the image composites each kept depth's own fragment's colour
   (float32), and of equal depths routed to one bucket the first submitted;
 * the buckets are cleared to a value below every depth, so a depth of 0 is stored like any other;
-* the range is per pixel, from a rasterization of the whole scene (not the scene's bounding box);
+* the bounding box is the scene's screen-aligned one (traces carry fragments, not the model's vertices): its
+  front face at the least depth of any fragment, its back face at the greatest, over the rectangle of screen
+  the fragments cover; the ``bounds`` pass draws its 12 triangles, a front and a back fragment at each pixel of
+  that rectangle, a full-screen pass's cost over the rectangle (no scene geometry);
 * every fragment of a capture pass writes all 8 targets (the ROP blends each), as an MRT draw does.
 
 ALU work beyond each operation's own (gpusim.schemes.common.alu): a fragment's bucket or bin
@@ -44,6 +50,7 @@ composites the kept ones (``COMPOSITE``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -79,6 +86,21 @@ def depth_range(trace, g: PixelGroups) -> tuple[np.ndarray, np.ndarray]:
     return near, far
 
 
+def box_range(trace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The scene's screen-aligned bounding box: (near, far) of every pixel (float32: the least and greatest
+    depth of any fragment inside the rectangle of screen the fragments cover, 0 outside) and the rectangle's
+    pixels, which the ``bounds`` pass draws."""
+    near = np.zeros(trace.pixel_count, np.float32)
+    far = np.zeros(trace.pixel_count, np.float32)
+    if not len(trace):
+        return near, far, np.zeros(0, np.int64)
+    xs = np.arange(int(trace.x.min()), int(trace.x.max()) + 1, dtype=np.int64)
+    ys = np.arange(int(trace.y.min()), int(trace.y.max()) + 1, dtype=np.int64)
+    box = (ys[:, None] * trace.width + xs[None, :]).ravel()
+    near[box], far[box] = np.float32(trace.z.min()), np.float32(trace.z.max())
+    return near, far, box
+
+
 def bucket_of(z: np.ndarray, near: np.ndarray, far: np.ndarray, count: int) -> np.ndarray:
     """min(floor(count (z - near) / (far - near)), count - 1) in float32 (0 where far = near): the uniform bucket
     (or bin) of each depth in its pixel's range. Monotone in z, so buckets ascend with depth."""
@@ -102,13 +124,39 @@ def _targets(buckets: int) -> int:
     return buckets // CHANNELS
 
 
-def _clear_and_bounds(plan: OpPlan, n: int, pix: np.ndarray, P: int, planes: dict[str, int]) -> None:
-    """Pass 0 clears the range and each structure's ``planes`` screen-sized target planes; pass 1 (bounds)
-    MAX-blends every fragment's (-z, z)."""
-    plan.add(0, "store", "depth_range", P, 1, lambda i, s: i * RANGE_BYTES, RANGE_BYTES)
-    for name, count in planes.items():
-        plan.add(0, "store", name, P * count, 1, lambda i, s: i * TEXEL_BYTES, TEXEL_BYTES)
-    plan.add(1, "blend", "depth_range", n, 1, lambda i, s: pix[i] * RANGE_BYTES, RANGE_BYTES)
+class _Ranges:
+    """Each fragment's depth range and the ``bounds`` pass that finds it, as ``bounds`` chooses."""
+
+    def __init__(self, bounds: str, trace, g: PixelGroups):
+        if bounds == "box":
+            near, far, self.box = box_range(trace)
+        else:
+            (near, far), self.box = depth_range(trace, g), None
+        self.near, self.far = near[g.pix], far[g.pix]
+
+    def used(self, g: PixelGroups) -> int:
+        """Pixels the range is written at: the box's, or each covered pixel."""
+        return g.covered if self.box is None else len(self.box)
+
+    @property
+    def geometry(self) -> int:
+        """Geometry passes of the scene the bounds pass makes."""
+        return int(self.box is None)
+
+    def bounds_pass(self) -> Pass:
+        return Pass("bounds", "geometry", "fragment") if self.box is None else Pass("bounds", "fullscreen", "pixel")
+
+    def add(self, plan: OpPlan, n: int, pix: np.ndarray, P: int, planes: dict[str, int]) -> None:
+        """Pass 0 clears the range and each structure's ``planes`` screen-sized target planes; pass 1 (bounds)
+        MAX-blends every fragment's (-z, z), or the box's front and back faces at each pixel it covers."""
+        plan.add(0, "store", "depth_range", P, 1, lambda i, s: i * RANGE_BYTES, RANGE_BYTES)
+        for name, count in planes.items():
+            plan.add(0, "store", name, P * count, 1, lambda i, s: i * TEXEL_BYTES, TEXEL_BYTES)
+        if self.box is None:
+            plan.add(1, "blend", "depth_range", n, 1, lambda i, s: pix[i] * RANGE_BYTES, RANGE_BYTES)
+        else:
+            box = self.box
+            plan.add(1, "blend", "depth_range", box, 2, lambda i, s: box[i] * RANGE_BYTES, RANGE_BYTES)
 
 
 def _route(plan: OpPlan, pass_index: int, n: int, pix: np.ndarray, P: int, instructions, writers,
@@ -133,13 +181,14 @@ def _composite(plan: OpPlan, pass_index: int, P: int, buckets: int, kept_n: np.n
     plan.compute(pass_index, P, buckets * BUCKET_SCAN + kept_n * COMPOSITE)
 
 
-def _result(scheme, trace, g: PixelGroups, kept: np.ndarray, buckets: int, plan: OpPlan, geometry_passes: int,
-            structures: list[Structure], stats: dict[str, Stat]) -> SchemeResult:
+def _result(scheme, trace, g: PixelGroups, kept: np.ndarray, buckets: int, plan: OpPlan, ranges: _Ranges,
+            scene_passes: int, structures: list[Structure], stats: dict[str, Stat]) -> SchemeResult:
+    """The result; ``scene_passes``: the geometry passes besides the bounds pass."""
     n, P, pix = len(trace), trace.pixel_count, g.pix
     kept_n = np.bincount(pix[kept], minlength=P)
     _composite(plan, len(plan.passes) - 1, P, buckets, kept_n)
     lost = n - len(kept)
-    structures = [Structure("depth_range", RANGE_BYTES, P, g.covered, "RG32F (-near, far) of each pixel"),
+    structures = [Structure("depth_range", RANGE_BYTES, P, ranges.used(g), "RG32F (-near, far) of each pixel"),
                   *structures,
                   Structure("buckets", DEPTH_BYTES, P * buckets, len(kept),
                             f"{buckets} buckets of a 32-bit depth per pixel ({_targets(buckets)} RGBA32F targets)")]
@@ -147,14 +196,25 @@ def _result(scheme, trace, g: PixelGroups, kept: np.ndarray, buckets: int, plan:
                                        "fragment (or an equal depth submitted earlier): MAX blending keeps one"),
              **stats}
     return SchemeResult(scheme.name, scheme.params(), composite_stored(trace, pix, kept, "rgba32f"), n, g.covered,
-                        structures, plan, geometry_passes=geometry_passes, dropped_fragments=int(lost),
+                        structures, plan, geometry_passes=ranges.geometry + scene_passes,
+                        dropped_fragments=int(lost),
                         overflowed_pixels=int(np.count_nonzero(g.count > kept_n)),
                         lists=CapturedLists(pix[kept], kept), stats=stats)
 
 
+@dataclass(frozen=True)
+class _Bucketed(Scheme):
+    """What the bucket schemes share: where the depth range comes from."""
+
+    bounds: Literal["box", "geometry"] = param(
+        "box", doc="the bounds pass that finds each pixel's depth range: 'box' draws the scene's bounding box "
+        "(the paper's: the range is the scene's at every pixel, no scene geometry), 'geometry' draws the scene "
+        "(each pixel's own range: fewer collisions, one geometry pass more)")
+
+
 @register("bucket-depth-peeling")
 @dataclass(frozen=True)
-class BucketDepthPeeling(Scheme):
+class BucketDepthPeeling(_Bucketed):
     summary = "bucket depth peeling: 32 uniform depth buckets per pixel over 8 MRTs, MAX blending (Liu et al. 2009)"
 
     passes: int = param(1, unit="passes", doc="capture passes: the range is split into passes x 32 uniform "
@@ -164,25 +224,25 @@ class BucketDepthPeeling(Scheme):
         g = PixelGroups(trace)
         n, P, pix, c = len(trace), trace.pixel_count, g.pix, self.passes
         buckets = BUCKETS * c
-        near, far = depth_range(trace, g)
-        bucket = bucket_of(trace.z, near[pix], far[pix], buckets)
-        passes = [Pass("clear", "clear", "entry"), Pass("bounds", "geometry", "fragment")]
+        ranges = _Ranges(self.bounds, trace, g)
+        bucket = bucket_of(trace.z, ranges.near, ranges.far, buckets)
+        passes = [Pass("clear", "clear", "entry"), ranges.bounds_pass()]
         passes += [Pass(f"capture {i}", "geometry", "fragment") for i in range(c)]
         passes.append(Pass("composite", "fullscreen", "pixel"))
         plan = OpPlan(passes, ["depth_range", "buckets"])
-        _clear_and_bounds(plan, n, pix, P, {"buckets": _targets(buckets)})
+        ranges.add(plan, n, pix, P, {"buckets": _targets(buckets)})
         capture = bucket // BUCKETS
         for i in range(c):
             mine = capture == i
             _route(plan, 2 + i, n, pix, P, BUCKET_INDEX + mine * (BUCKETS * CHANNEL_SELECT),
                    n if c == 1 else np.flatnonzero(mine), "buckets", i * _targets(BUCKETS), _targets(BUCKETS))
         kept = one_per_bucket(pix, bucket, g.key)
-        return _result(self, trace, g, kept, buckets, plan, 1 + c, [], {})
+        return _result(self, trace, g, kept, buckets, plan, ranges, c, [], {})
 
 
 @register("adaptive-bucket-depth-peeling")
 @dataclass(frozen=True)
-class AdaptiveBucketDepthPeeling(Scheme):
+class AdaptiveBucketDepthPeeling(_Bucketed):
     summary = "adaptive bucket depth peeling: 32 buckets equalised over a depth-occupancy histogram (Liu et al. 2009)"
 
     histogram_bins: int = param(512, unit="bins/pixel", doc="uniform bins of the occupancy histogram over the "
@@ -198,8 +258,8 @@ class AdaptiveBucketDepthPeeling(Scheme):
         g = PixelGroups(trace)
         n, P, pix, H = len(trace), trace.pixel_count, g.pix, self.histogram_bins
         words, targets = H // 32, H // BINS_PER_TARGET
-        near, far = depth_range(trace, g)
-        bin_ = bucket_of(trace.z, near[pix], far[pix], H)
+        ranges = _Ranges(self.bounds, trace, g)
+        bin_ = bucket_of(trace.z, ranges.near, ranges.far, H)
         # each fragment's bin's rank among its pixel's occupied bins, and their number
         order = lex_order(pix, bin_)
         ps = pix[order]
@@ -211,11 +271,11 @@ class AdaptiveBucketDepthPeeling(Scheme):
             occupied[ps[last]] = ranked[last] + 1
         bucket = np.where(occupied[pix] <= BUCKETS, rank, rank * BUCKETS // np.maximum(occupied[pix], 1))
 
-        passes = [Pass("clear", "clear", "entry"), Pass("bounds", "geometry", "fragment"),
+        passes = [Pass("clear", "clear", "entry"), ranges.bounds_pass(),
                   Pass("histogram", "geometry", "fragment"), Pass("capture", "geometry", "fragment"),
                   Pass("composite", "fullscreen", "pixel")]
         plan = OpPlan(passes, ["depth_range", "histogram", "buckets"])
-        _clear_and_bounds(plan, n, pix, P, {"histogram": targets, "buckets": _targets(BUCKETS)})
+        ranges.add(plan, n, pix, P, {"histogram": targets, "buckets": _targets(BUCKETS)})
         _route(plan, 2, n, pix, P, BUCKET_INDEX + words * CHANNEL_SELECT, n, "histogram", 0, targets)
         _route(plan, 3, n, pix, P, BUCKET_INDEX + words * POPCOUNT_WORD + EQUALISE + BUCKETS * CHANNEL_SELECT, n,
                "buckets", 0, _targets(BUCKETS), reads=("histogram", targets))
@@ -231,4 +291,4 @@ class AdaptiveBucketDepthPeeling(Scheme):
                                        "(bins share buckets)"),
                  "occupied_bins": Stat(int(occupied.max(initial=0)), "bins",
                                        "largest number of occupied histogram bins of a pixel")}
-        return _result(self, trace, g, kept, BUCKETS, plan, 3, [hist], stats)
+        return _result(self, trace, g, kept, BUCKETS, plan, ranges, 2, [hist], stats)
