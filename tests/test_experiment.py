@@ -297,6 +297,37 @@ def test_run_ids_follow_config_and_trace_content(small_run, tmp_path):
     assert run_experiment(same, copy, workers=1, quiet=True).reused == 13
 
 
+def test_runs_made_by_other_code_are_computed_again(small_run, tmp_path, monkeypatch):
+    """A run's id holds the model's code: a sweep into runs an edited model made reuses none of them, and gives
+    the same figures when the edit changed none."""
+    from gpusim.experiment import grid
+    path, out = small_run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    monkeypatch.setattr(grid, "model_fingerprint", lambda: "0" * 16)
+    again = run_experiment(load_experiment(str(path)), copy, workers=1, quiet=True)
+    assert again.reused == 0 and again.computed == 13
+    before, after = table(out), table(copy)
+    assert not set(before["run"]) & set(after["run"])
+    same_table(before.drop(columns="run"), after.drop(columns="run"))
+
+
+def test_the_model_fingerprint_follows_the_models_code_not_the_reports(tmp_path):
+    from gpusim.experiment.grid import source_fingerprint
+    for rel in ("hw/core.py", "report/tables.py", "cli/main.py", "__init__.py"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("x = 1\n")
+    first = source_fingerprint(tmp_path)
+    (tmp_path / "report" / "tables.py").write_text("x = 2\n")
+    (tmp_path / "cli" / "main.py").write_text("x = 2\n")
+    assert source_fingerprint(tmp_path) == first
+    (tmp_path / "hw" / "core.py").write_text("x = 2\n")
+    changed = source_fingerprint(tmp_path)
+    assert changed != first and len(changed) == 16
+    (tmp_path / "hw" / "core.py").rename(tmp_path / "hw" / "unit.py")     # a move is a change too
+    assert source_fingerprint(tmp_path) not in (first, changed)
+
+
 def test_failed_runs_are_rows_and_the_exit_status_says_so(tmp_path, capsys):
     path = write(tmp_path / "e.toml", SMALL.replace("[schemes.alpha-blend]", "[gpu-set]\n\"runner.max_cycles\" = 2000"
                                                     "\n[schemes.alpha-blend]"))

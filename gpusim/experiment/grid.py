@@ -6,12 +6,15 @@ table, parameter values, fidelity level innermost), building every GPU config
 and scheme once so a bad value fails before anything runs. A combination a
 scheme cannot run is kept as a run with a ``skip`` reason, never failed.
 
-A run's id (:func:`run_id`) is a stable hash of its resolved config and the
-content of its trace, so a finished run is recognised in any later sweep.
+A run's id (:func:`run_id`) is a stable hash of its resolved config, the
+content of its trace and the code that computes its figures
+(:func:`model_fingerprint`), so a finished run is recognised in any later sweep
+of the same code, and never reused by code that would compute it differently.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import itertools
 import json
@@ -155,6 +158,30 @@ def expand(exp) -> list[RunSpec]:
     return runs
 
 
+#: gpusim's subpackages whose code computes no figure of a run: the report's rendering, the command line
+PRESENTATION = ("report", "cli")
+
+
+@functools.cache
+def model_fingerprint() -> str:
+    """:func:`source_fingerprint` of the gpusim package that is running. A run's id includes it: a sweep into
+    a directory of runs made by other code (an edited model, another version) computes them again instead
+    of reusing figures this code would not give."""
+    return source_fingerprint(Path(__file__).resolve().parents[1])
+
+
+def source_fingerprint(root: Path) -> str:
+    """16 hex digits of a hash of the ``.py`` files under the package directory ``root``, all but the
+    :data:`PRESENTATION` subpackages' (their paths and contents)."""
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root)
+        if rel.parts[0] in PRESENTATION:
+            continue
+        digest.update(rel.as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
 def gpu_identity(config: GpuConfig) -> dict:
     """The GPU config as it enters a run's id: ``runner.workers`` changes no figure, so it is left out."""
     data = config.to_dict()
@@ -169,12 +196,13 @@ def resolved_run(run: RunSpec, trace_sha: str) -> dict:
             "scene_set": dict(run.source.scene_set), "trace_sha256": trace_sha, "scheme": run.scheme,
             "variant": run.label, "params": run.params,
             "fidelity": run.fidelity, "gpu": run.gpu, "gpu_set": dict(run.gpu_set),
-            "gpu_config": gpu_identity(run.gpu_config)}
+            "gpu_config": gpu_identity(run.gpu_config), "model": model_fingerprint()}
 
 
 def run_id(run: RunSpec, trace_sha: str) -> str:
-    """A stable 16-hex-digit id of the run's resolved config and its trace's content (where the trace came
-    from, a path, is left out: the content decides; so is ``runner.workers``, which changes no figure)."""
+    """A stable 16-hex-digit id of the run's resolved config, its trace's content and the model's code (where
+    the trace came from, a path, is left out: the content decides; so is ``runner.workers``, which changes no
+    figure)."""
     identity = {k: v for k, v in resolved_run(run, trace_sha).items() if k != "source"}
     identity["gpu_set"] = {k: v for k, v in identity["gpu_set"].items() if k != "runner.workers"}
     text = json.dumps(identity, sort_keys=True, default=str)
