@@ -962,7 +962,7 @@ class _PassTimer:
         pk = plan.passes[p]
         if pk.kind == "flush":
             return {"name": pk.name, "kind": pk.kind, "bound": "flush", "warps": 0,
-                    "cycles": flush_cycles(c, -(-work.width * work.height // ws)) + overhead}
+                    "cycles": flush_cycles(c) + overhead}
         last_producer, last_serial, waited = None, None, False
         steps = 0                             # instructions a warp has issued before the group (the busiest lane's)
         adds: list = []                       # each group's lane info, dependent-chain cycles per lane, threads

@@ -135,8 +135,8 @@ class SimtCore(Unit):
         """The SM of each of a pass's ``warps`` (round robin in submission order)."""
         return np.arange(warps, dtype=np.int64) % sms
 
-    def flush_cycles(self, warps: int) -> int:
-        return flush_cycles(self.config, warps)
+    def flush_cycles(self) -> int:
+        return flush_cycles(self.config)
 
     def start_pass(self, p, ready, serve: list) -> list:
         """Start the slot processes of pass ``p`` at the current cycle; the processes.
@@ -236,7 +236,9 @@ class SimtCore(Unit):
                 + " ".join(f"[{i}] free={f}" for i, f in enumerate(self.sm_free[:8])))
 
 
-def flush_cycles(core: CoreConfig, warps: int) -> int:
-    """A flush: drain the pipeline, then a full-screen quad of ``warps`` ALU-only warps on the SMs' schedulers."""
-    per_port = -(-warps // core.issue_ports)
-    return core.pipeline_latency + per_port * core.op_issue_cycles
+def flush_cycles(core: CoreConfig) -> int:
+    """A flush: the pipeline drains (``pipeline_latency``). The full-screen quad that forces it (colour writes
+    masked) shades no pixel: seed 004's Table 1 puts a batch and its flush at 11.4-11.8 us for Dragon on the
+    GeForce 7900 GTX, less than its 24 pixel pipelines need to shade a 512x512 quad once (16.8 us); see
+    docs/timing-model.md ("The papers' orderings")."""
+    return core.pipeline_latency

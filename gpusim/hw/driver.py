@@ -6,7 +6,7 @@ by the CPU-side driver with the state changes around it (render targets,
 shaders, a flush). ``driver.pass_us`` is that cost, paid once per pass before
 its work starts; the GPU is idle meanwhile. A multi-pass scheme pays it per
 pass, the k-buffer's batching heuristic twice per batch (the batch's draw
-call and its flushing full-screen quad).
+call and its flushing full-screen quad, which then drains the pipeline).
 """
 
 from __future__ import annotations

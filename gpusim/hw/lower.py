@@ -423,8 +423,7 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
         mode, ps = modes[p], by_pass[p]
         ops = sum(pc.operations for pc in ps)
         if not ps:
-            flush = -(-work.width * work.height // ws) if pk.kind == "flush" else 0
-            passes.append(PassProgram(p, pk.name, pk.kind, np.zeros(1, np.int64), 0, warp0, flush,
+            passes.append(PassProgram(p, pk.name, pk.kind, np.zeros(1, np.int64), 0, warp0,
                                       operations=0, operations_total=int(totals[p])))
             continue
         # lanes of the pass: distinct lane keys in submission order

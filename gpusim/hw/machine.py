@@ -10,8 +10,9 @@ kernel launch: gpusim.hw.driver). Passes are barriers: a pass ends when its
 last operation has completed and every unit is idle again (stores landed,
 the ROPs drained), so the next pass starts on an idle machine and its cycles
 do not depend on when it starts. A
-``flush`` pass (the k-buffer's batching heuristic) drains the pipeline
-(``core.pipeline_latency``) and runs a full-screen quad of ALU-only fragments.
+``flush`` pass (the k-buffer's batching heuristic) is a draw call that drains
+the pipeline (``core.pipeline_latency``): its full-screen quad, colour writes
+masked, shades nothing (gpusim.hw.core.flush_cycles).
 
 A watchdog process guards each pass: a run that makes no progress for
 ``runner.no_progress_cycles`` (a deadlock: warps wait on each other and
@@ -156,7 +157,7 @@ class Machine:
             start = self.now
             self._advance(start + overhead)          # the driver issues the pass
             if p.kind == "flush":
-                self._advance(start + overhead + self.core.flush_cycles(p.flush_warps))   # after the driver
+                self._advance(start + overhead + self.core.flush_cycles())   # after the driver
             elif p.warps:
                 self._run_pass(p)
             self.guard_max(self.now)

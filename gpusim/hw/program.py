@@ -68,7 +68,6 @@ class PassProgram:
     wi_start: np.ndarray           # per warp, plus a final end
     lanes: int                     # threads of the pass
     first_warp: int = 0            # global number of the pass's first warp
-    flush_warps: int = 0           # ALU-only warps of a flush pass (a full-screen quad, no memory ops)
     warp_triangles: np.ndarray | None = None   # fixed-function rasterizer: triangles rasterized before each
                                                # warp's fragments are all out (its last triangle + 1)
     triangles: int = 0             # triangles the fixed-function front end takes in the pass

@@ -448,8 +448,6 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r: int, pieces, pa
         machine = scaled_gpu(gpu, mine, len(kept[0]) / max(1, len(every_lines[0])))
         warm = warm_lines(every_lines, kept, gpu.sample.seed + r)
     program = dataclasses.replace(program, front_end_cycles=front, l2_warm=warm)
-    for pp in program.passes:        # a flush's full-screen quad: each SM its share of the GPU's warps
-        pp.flush_warps = -(-pp.flush_warps // gpu.core.sms) * mine
     return machine, program
 
 
