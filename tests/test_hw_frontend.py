@@ -290,3 +290,27 @@ def test_software_rasterizer_through_an_l2():
     gpu = load_gpu("modern", ["driver.pass_us=0"])
     cycles, m = _run(gpu, work)
     assert cycles > 0 and m.units["l2"].summary(cycles)["requests"] > 0
+
+
+def test_quads_so_far_in_one_pass_is_the_sorts():
+    """The compiled one-pass count of the quads emitted so far (triangles in order) gives what the stable sort of
+    (triangle, quad) keys gives, and a trace whose triangles are out of order takes the sort."""
+    from types import SimpleNamespace
+
+    import gpusim.hw.lower as lower_module
+    rng = np.random.default_rng(4)
+    for trial in range(60):
+        w, h = (int(v) for v in rng.integers(1, 30, 2))
+        n = int(rng.integers(1, 2000))
+        prim = np.sort(rng.integers(0, int(rng.integers(1, 100)), n))
+        if trial % 3 == 0:
+            prim = rng.permutation(prim)                      # out of order: the sort path
+        work = SimpleNamespace(frag_prim=prim, frag_pixel=rng.integers(0, w * h, n), width=w, height=h)
+        keys = np.arange(n)
+        q = quad_ids(prim, work.frag_pixel, w, h)
+        expected = np.cumsum(np.isin(np.arange(n), np.unique(q, return_index=True)[1]))   # each quad's first
+        assert np.array_equal(lower_module._quads_so_far(work, keys), expected), trial
+        quad = q - prim * ((w + 1) // 2 * ((h + 1) // 2))
+        if trial % 3:
+            first = lower_module._first_in_quads(prim.astype(np.int64), quad, (w + 1) // 2 * ((h + 1) // 2))
+            assert np.array_equal(np.cumsum(first), expected), trial       # the kernel's numpy-free source

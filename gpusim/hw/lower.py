@@ -38,10 +38,11 @@ import numpy as np
 
 from gpusim.errors import GpusimError
 from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
-from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, emission, quad_ids
+from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, emission, quad_ids, screen_quads
 from gpusim.hw.rop import framebuffer_traffic
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, interleave, mod
+from gpusim.jit import njit
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OPS, OpPlan
 from gpusim.schemes.common.arrays import lex_sorted, rank_in_runs
@@ -798,11 +799,40 @@ def fragment_warps(work: Workload, gpu, lane_keys: np.ndarray) -> tuple[np.ndarr
 def _quads_so_far(work: Workload, lane_keys: np.ndarray) -> np.ndarray:
     """Per lane (fragment, in submission order): the 2x2 quads the rasterizer has emitted by the time it emits
     this lane's (a quad counts at its first fragment)."""
-    q = quad_ids(work.frag_prim[lane_keys], work.frag_pixel[lane_keys], work.width, work.height)
-    first = np.zeros(len(q), bool)
-    order, ascending = lex_sorted(q)        # a stable sort: each quad's first lane leads its run
-    first[order[run_starts(ascending)]] = True
+    prim, pixel = work.frag_prim[lane_keys], work.frag_pixel[lane_keys]
+    kernel = _compiled_first_in_quads()
+    if kernel is not None and len(prim) > 1 and bool((prim[1:] >= prim[:-1]).all()):
+        quad, count = screen_quads(pixel, work.width, work.height)      # triangles in order: one pass
+        first = kernel(np.asarray(prim, np.int64), quad, count)
+    else:
+        q = quad_ids(prim, pixel, work.width, work.height)
+        first = np.zeros(len(q), bool)
+        order, ascending = lex_sorted(q)        # a stable sort: each quad's first lane leads its run
+        first[order[run_starts(ascending)]] = True
     return np.cumsum(first)
+
+
+def _first_in_quads(prim: np.ndarray, quad: np.ndarray, quads: int) -> np.ndarray:
+    """Whether each fragment is the first of its triangle in its screen quad, for fragments whose triangles
+    come in order (``prim`` nondecreasing: a triangle's fragments are contiguous, so a quad's last triangle
+    tells): what the stable sort of (triangle, quad) keys finds, in one pass."""
+    last = np.full(quads, -1, np.int64)
+    first = np.zeros(len(prim), np.bool_)
+    for i in range(len(prim)):
+        q = quad[i]
+        if last[q] != prim[i]:
+            first[i] = True
+            last[q] = prim[i]
+    return first
+
+
+_KERNEL: list = []     # [the compiled _first_in_quads, or None], made on first use
+
+
+def _compiled_first_in_quads():
+    if not _KERNEL:
+        _KERNEL.append(njit(_first_in_quads))
+    return _KERNEL[0]
 
 
 def hash32(values: np.ndarray, seed: int = 0) -> np.ndarray:

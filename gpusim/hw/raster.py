@@ -165,11 +165,17 @@ def per_triangle_cycles(gpu) -> float:
     return max(1.0 / r.triangles_per_cycle, fetch, shade)
 
 
-def quad_ids(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> np.ndarray:
-    """A key of each fragment's 2x2 quad within its triangle (equal keys: one quad)."""
+def screen_quads(pixel: np.ndarray, width: int, height: int) -> tuple[np.ndarray, int]:
+    """Each pixel's 2x2 quad of the screen (numbered row by row) and the screen's number of quads."""
     qw, qh = (width + 1) // 2, (height + 1) // 2
     pixel = np.asarray(pixel, np.int64)
-    return np.asarray(prim, np.int64) * (qw * qh) + (pixel // width // 2) * qw + (pixel % width) // 2
+    return (pixel // width // 2) * qw + (pixel % width) // 2, qw * qh
+
+
+def quad_ids(prim: np.ndarray, pixel: np.ndarray, width: int, height: int) -> np.ndarray:
+    """A key of each fragment's 2x2 quad within its triangle (equal keys: one quad)."""
+    quad, count = screen_quads(pixel, width, height)
+    return np.asarray(prim, np.int64) * count + quad
 
 
 def bbox_pixels(prim: np.ndarray, pixel: np.ndarray, width: int, triangles: int) -> np.ndarray:
