@@ -314,3 +314,15 @@ def test_quads_so_far_in_one_pass_is_the_sorts():
         if trial % 3:
             first = lower_module._first_in_quads(prim.astype(np.int64), quad, (w + 1) // 2 * ((h + 1) // 2))
             assert np.array_equal(np.cumsum(first), expected), trial       # the kernel's numpy-free source
+
+
+def test_jit_start_runs_once_and_leaves_the_kernels_results_alone(monkeypatch):
+    """gpusim.jit.start starts numba once per process (an experiment's task calls it before what it times)."""
+    import gpusim.jit as jit
+    calls = []
+    monkeypatch.setattr(jit, "_STARTED", [])
+    monkeypatch.setattr(jit, "njit", lambda f: calls.append(f) or f)
+    jit.start()
+    jit.start()
+    assert calls == [jit._ping] and jit._STARTED == [True]
+    assert jit._ping(1) == 2

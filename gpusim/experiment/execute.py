@@ -204,10 +204,12 @@ def timing_stat_rows(timing: dict) -> list[dict]:
 def execute(task: Task, trace=None, reference=None) -> list[Outcome]:
     """Run ``task`` on ``trace`` and its exact ``reference`` composite (read from ``task.trace_path`` and the
     reference saved beside it when not given); one outcome per run, in order."""
+    from gpusim.jit import start
     from gpusim.metrics import composite_exact
     from gpusim.replay import run_functional, run_timing
     from gpusim.trace_io import load_trace
 
+    start()                                  # numba's start-up, once per process: in no run's wall time
     try:
         trace = trace if trace is not None else load_trace(task.trace_path)
         if reference is None:
