@@ -40,19 +40,21 @@ def ran_experiment(name: str, out):
     return out
 
 
-#: the test modules that take longest (seconds of one core, measured on the 2-core reference machine): run
+#: the test modules that take longest (seconds of one core, measured on the 2-core reference machine with
+#: nothing else running, pytest's junit times): run
 #: first, so that ``pytest -n 2 --dist loadfile`` (scripts/test.sh) does not start one of them when the other
 #: worker is nearly done; scripts/test.sh passes --no-loadscope-reorder, which keeps this order instead of
 #: xdist's (files with the most tests first)
-SLOW_FIRST = ("test_timing_golden.py",    # ~610 s: the golden table, one module fixture
-              "test_stability.py",        # ~250 s: every scheme and level on every built-in scene
-              "test_papers.py",           # ~190 s: the seeds' CI experiments
-              "test_fidelity_report.py",  # ~110 s: the fidelity corpus at CI size
-              "test_hw_stream.py",        # ~100 s
-              "test_experiment.py",       # ~60 s
-              "test_hw_timing.py",        # ~55 s
-              "test_stability_report.py",  # ~55 s
-              "test_extremes.py")         # ~50 s
+SLOW_FIRST = ("test_timing_golden.py",    # ~200 s: the golden table, one module fixture
+              "test_stability.py",        # ~75 s: every scheme and level on every built-in scene
+              "test_papers.py",           # ~60 s: the seeds' CI experiments
+              "test_hw_stream.py",        # ~55 s
+              "test_fidelity_report.py",  # ~45 s: the fidelity corpus at CI size
+              "test_experiment.py",       # ~30 s
+              "test_stability_report.py",  # ~30 s
+              "test_properties.py",       # ~20 s
+              "test_hw_timing.py",        # ~20 s
+              "test_extremes.py")         # ~16 s
 
 
 def pytest_collection_modifyitems(config, items):
