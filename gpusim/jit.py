@@ -35,6 +35,14 @@ def njit(func: Callable) -> Callable | None:
         return numba.njit(**options)(func)
 
 
+def compiled_once(cache: list, func: Callable) -> Callable | None:
+    """``func`` compiled with :func:`njit` (or None), made on the first call and kept in ``cache``, a module's
+    one-element list (a test sets it to ``[None]`` to take the numpy path)."""
+    if not cache:
+        cache.append(njit(func))
+    return cache[0]
+
+
 def _ping(value: int) -> int:
     return value + 1
 

@@ -42,7 +42,7 @@ from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, emission, quad_ids, scree
 from gpusim.hw.rop import framebuffer_traffic
 from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, interleave, mod
-from gpusim.jit import njit
+from gpusim.jit import compiled_once
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OPS, OpPlan
 from gpusim.schemes.common.arrays import lex_sorted, rank_in_runs
@@ -830,9 +830,7 @@ _KERNEL: list = []     # [the compiled _first_in_quads, or None], made on first 
 
 
 def _compiled_first_in_quads():
-    if not _KERNEL:
-        _KERNEL.append(njit(_first_in_quads))
-    return _KERNEL[0]
+    return compiled_once(_KERNEL, _first_in_quads)
 
 
 def hash32(values: np.ndarray, seed: int = 0) -> np.ndarray:

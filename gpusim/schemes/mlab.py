@@ -43,7 +43,7 @@ from typing import Literal
 import numpy as np
 
 from gpusim.config import param
-from gpusim.jit import njit
+from gpusim.jit import compiled_once
 from gpusim.opplan import OpPlan, Pass
 from gpusim.schemes.base import Scheme, register
 from gpusim.schemes.common.alu import COMPOSITE, MLAB_FRAGMENT, MLAB_MERGE, compare_exchange
@@ -131,9 +131,7 @@ _KERNEL: list = []     # [the compiled _later_fragments, or None], made on first
 
 
 def _compiled_later_fragments():
-    if not _KERNEL:
-        _KERNEL.append(njit(_later_fragments))
-    return _KERNEL[0]
+    return compiled_once(_KERNEL, _later_fragments)
 
 
 def resolve_layers(values: np.ndarray, background: np.ndarray) -> np.ndarray:

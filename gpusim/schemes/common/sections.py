@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gpusim.jit import njit
+from gpusim.jit import compiled_once
 from gpusim.metrics.composite import runs_by_length
 from gpusim.schemes.common.arrays import lex_order, rank_in_runs
 
@@ -136,9 +136,7 @@ _KERNEL: list = []     # [the compiled _budget_placement, or None], made on firs
 
 
 def _compiled_budget_placement():
-    if not _KERNEL:
-        _KERNEL.append(njit(_budget_placement))
-    return _KERNEL[0]
+    return compiled_once(_KERNEL, _budget_placement)
 
 
 def _budget_placement_by_rank(pix_sorted: np.ndarray, bits_sorted: np.ndarray, fits: np.ndarray, capacity: int,
