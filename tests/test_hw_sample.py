@@ -167,28 +167,69 @@ def test_a_sample_of_its_share_of_the_work_runs_on_its_share_of_the_sms(spheres)
     assert set(rec["sample"]["replicate_sms"]) <= {sampled_sms(gpu), sampled_sms(gpu) + 1}
 
 
-def test_warm_lines_stand_for_the_runs_other_touches():
-    # 4,000 lines the run touches 4 times each, the sample once: the first touch is the sample's own with
-    # probability 1/4, so about 3/4 of the lines are warm; lines the sample touches as often as the run, or
-    # that the run does not count (another structure's), never are
-    from gpusim.hw.sample import warm_lines
-    lines = np.arange(10_000, dtype=np.int64) * 7
-    every = (lines, np.where(lines < 28_000, 4, 2))
-    kept = (lines[::2], np.where(lines[::2] < 28_000, 1, 2))
-    warm = warm_lines(every, kept, seed=3)
-    shared = np.count_nonzero(warm < 28_000)
-    assert abs(shared / 2_000 - 0.75) < 0.04
-    assert not np.count_nonzero(warm >= 28_000)
-    absent = warm_lines((lines[:0], lines[:0]), (lines[:5], np.ones(5, np.int64)), seed=3)
-    assert not len(absent)
-    assert np.array_equal(warm, warm_lines(every, kept, seed=3))        # deterministic
+def test_the_lru_model_gives_each_request_its_outcome():
+    # one set of 2 ways: A (write), B, A hits, C evicts B (the least recent; clean), B evicts A (dirty from its
+    # write): MISS_DIRTY; an instruction's second segment of a line takes the first's outcome and shares its miss
+    from gpusim.hw.memory import warming
+    order = np.arange(5)
+    seg_lo, seg_hi = np.array([0, 1, 2, 3, 4]), np.array([1, 2, 3, 4, 6])
+    set_of = np.zeros(6, np.int64)
+    tag_of = np.array([10, 11, 10, 12, 11, 11])
+    writes = np.array([True, False, False, False, False])
+    expect = [warming.MISS, warming.MISS, warming.HIT, warming.MISS, warming.MISS_DIRTY, warming.MISS_DIRTY]
+    for kernel in (warming._lru_outcomes, warming.compiled_once([], warming._lru_outcomes)):
+        if kernel is None:
+            continue
+        code, lanes = np.zeros(6, np.uint8), np.zeros(6, np.uint16)
+        kernel(seg_lo[order], seg_hi[order], set_of, tag_of, writes[order], 1, 2, code, lanes)
+        assert code.tolist() == expect
+        assert lanes.tolist() == [1, 1, 1, 1, 2, 2]          # the last instruction's two segments share B
+
+
+def test_the_run_is_replayed_in_a_sliding_window_of_resident_warps():
+    # 4 warps of 3 instructions: with 4 resident, warp w's instruction k at w x 3/4 + k (a warp starts three
+    # quarters of an instruction after the one before); with one, warp after warp
+    from types import SimpleNamespace
+    from gpusim.hw.memory.warming import issue_order
+    wi = np.arange(12)
+    prog = SimpleNamespace(wi_warp=wi // 3, wi_pass=np.zeros(12, np.int64),
+                           passes=[SimpleNamespace(instructions=12, warps=4, first_warp=0)])
+    many = SimpleNamespace(core=SimpleNamespace(sms=1, warps_per_sm=4))
+    one = SimpleNamespace(core=SimpleNamespace(sms=1, warps_per_sm=1))
+    assert issue_order(prog, many, wi).tolist() == [0, 3, 1, 6, 4, 2, 9, 7, 5, 10, 8, 11]
+    assert issue_order(prog, one, wi).tolist() == list(range(12))
+
+
+def test_a_sample_takes_its_l2_misses_from_the_run(spheres):
+    # the k-buffer's 8 entries of 20 B a pixel (655 KB) through an L2 of 4 x 64 KB: the run thrashes (50,824
+    # misses). The sample's requests take their lanes' share of the run's misses (functional warming): 38,948
+    # scaled up (the replay's issue order finds 44,424; the replicates' 3 tiles carry a little less than
+    # their share) and the cycles 1.00x; a slice cut to the sample's share of the run's lines had missed
+    # 13,537 times, at 0.92x the cycles
+    gpu = load_gpu("laptop-ampere", ["runner.workers=1", "sample.min_tiles=1", "l2.size_bytes=65536"])
+    full = replay(spheres, "kbuffer", {}, "full", gpu)[1]["timing"]
+    sampled = replay(spheres, "kbuffer", {}, "sampled", gpu)[1]["timing"]
+    assert sampled["sample"]["share"] < 0.1
+    assert sampled["units"]["l2"]["misses"] == pytest.approx(full["units"]["l2"]["misses"], rel=0.25)
+    assert sampled["cycles"] == pytest.approx(full["cycles"], rel=0.03)
+
+
+def test_the_warming_replay_gives_the_same_figures_without_numba(monkeypatch):
+    # the LRU replay and the lanes' search run as plain Python where numba is absent: the same record
+    from gpusim.hw.memory import warming
+    scene, base = load_scene("nested-spheres", ["screen.width=32", "screen.height=32"])
+    trace = trace_scene(scene, base, progress=False)
+    gpu = load_gpu("laptop-ampere", ["runner.workers=1", "sample.min_tiles=1", "l2.size_bytes=16384"])
+    compiled = replay(trace, "kbuffer", {}, "sampled", gpu)[1]["timing"]
+    monkeypatch.setattr(warming, "_KERNELS", {"lru": [None], "run_segment": [None]})
+    plain = replay(trace, "kbuffer", {}, "sampled", gpu)[1]["timing"]
+    assert plain["cycles"] == compiled["cycles"] and plain["units"]["l2"] == compiled["units"]["l2"]
 
 
 def test_a_triangle_sample_finds_the_lines_other_triangles_brought_in(spheres):
     # FreePipe's A-buffer samples whole blocks of triangles: a pixel's layers come from triangles of many
-    # blocks, so the sample's first touch of a line is mostly not the run's. With the L2 warm where the run's
-    # other triangles bring a line in, and holding the sample's share of the run's lines, the misses scale to
-    # the full level's (1.02x here; without the correction 2.3x) and the cycles come closer (0.95x; 1.17x)
+    # blocks, so the sample's first touch of a line is mostly not the run's first. With the run's outcomes the
+    # misses scale to the full level's (a sample's own cache had missed 2.3x as often, at 1.17x the cycles)
     gpu = load_gpu("laptop-ampere", ["runner.workers=1", "sample.min_tiles=1"])
     full = replay(spheres, "freepipe-abuffer", {}, "full", gpu)[1]["timing"]
     sampled = replay(spheres, "freepipe-abuffer", {}, "sampled", gpu)[1]["timing"]

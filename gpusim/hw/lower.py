@@ -281,16 +281,14 @@ class Census:
     """What a sample needs to know of every operation of a run (or of a chunk of its passes) that
     :func:`plan_pieces` counts, where the pieces keep only the rows some sample may keep: the run's load on
     each shared unit's instances in each pass (:func:`_occupancy`), its atomic words and the operations on
-    each (``Program.hold_scale``) and, where ``lines``, the addresses its operations send down the memory
-    path (an L2's lines)."""
+    each (``Program.hold_scale``)."""
 
-    def __init__(self, plan: OpPlan, gpu, passes: tuple[int, int] | None = None, lines: bool = False):
+    def __init__(self, plan: OpPlan, gpu, passes: tuple[int, int] | None = None):
         self.gpu = gpu
         self.p_first, p_end = passes if passes is not None else (0, len(plan.passes))
         self.n_pass = p_end - self.p_first
         self.every: dict[str, np.ndarray] = {}
         self.words: list[np.ndarray] = []
-        self.addresses: list | None = [] if lines else None
 
     def add(self, op: str, pass_of, address: np.ndarray, nbytes) -> None:
         """Count a memory group's operations: their passes (the plan's numbers), addresses and bytes."""
@@ -299,8 +297,6 @@ class Census:
             self.every[name] = self.every.get(name, 0) + np.bincount(key, weights=weight, minlength=self.n_pass * n)
         if entry_unit(op) == "atomic":
             self.words.append(_word_key(address, p))
-        if self.addresses is not None:
-            self.addresses.append((op, address))
 
     def word_ops(self) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`_word_ops` of the run's atomic operations."""

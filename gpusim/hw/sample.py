@@ -20,14 +20,10 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   hot partitions) and its latencies, and a request occupies it ``1/s`` as long
   as it is served (``Program.share``: the rest of the GPU's traffic); the quad
   rasterizer runs at ``s`` of its rate, the scoreboard ``s`` of its cells.
-  The L2 (functional warming, as interval-sampling simulators warm caches): an
-  L2 slice holds the sample's share of the run's lines (the distinct lines the
-  sample's memory operations touch over the run's), and a line the run touches
-  ``n`` times and the sample ``k`` times is warm with probability ``1 - k/n``
-  (:func:`warm_lines`): the sample's first touch of it finds it, brought in by
-  the run's other threads, so the misses the sample scales up are the run's
-  compulsory misses, not one per line the sample happens to touch first (a
-  pixel's layers written by many sampled-out triangles). The geometry front end is the GPU's: every
+  The L2 (functional warming, gpusim.hw.memory.warming): the whole run's
+  requests go through an LRU model of the slices in about the full level's
+  issue order, and each request of a sample misses with the share of those
+  misses its lanes carry; the slices' tags decide nothing the run decided. The geometry front end is the GPU's: every
   pass submits all its triangles and a warp starts when its own are out.
   Operations on an atomic word of which the sample keeps only some hold it as
   long as all of them (``Program.hold_scale``): a global counter's chain is as
@@ -75,14 +71,12 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import (INDEX_BASE, Census, Workload, hash32, lower, pass_operations, plan_pieces, sample_masks,
+from gpusim.hw.lower import (Census, Workload, lower, pass_operations, plan_pieces, sample_masks,
                              share_pieces, split_by, thread_mapping)
-from gpusim.hw.memory import MEMORY_OPS
-from gpusim.hw.memory.l2 import line_keys
+from gpusim.hw.memory.warming import Outcomes
 from gpusim.hw.parallel import fork_map, fork_workers
 from gpusim.hw.program import Program
 from gpusim.hw.raster import per_triangle_cycles
-from gpusim.hw.rop import framebuffer_operations
 from gpusim.hw.stream import StreamedRun, carried_state, plan_chunks
 from gpusim.opplan import OPS
 
@@ -154,49 +148,16 @@ def fitted_sms(gpu, kept: int, total: int, floor: int) -> int:
     return max(floor, min(gpu.core.sms, round(kept / total * gpu.core.sms)))
 
 
-def scaled_gpu(gpu, sms: int, lines: float | None = None):
+def scaled_gpu(gpu, sms: int):
     """``gpu`` cut down to ``sms`` of its SMs: the quad rasterizer's rate and the scoreboard's cells in the same
-    share, the L2 slices' lines in the share ``lines`` (default the same; a sample holds that share of the run's
-    lines: :func:`line_touches`) (the other units' share is ``Program.share``)."""
+    share (the other units' share is ``Program.share``; the L2's hits and misses are the run's:
+    gpusim.hw.memory.warming)."""
     s = sms / gpu.core.sms
-    lines = s if lines is None else lines
-    if sms == gpu.core.sms and lines >= 1:
+    if sms == gpu.core.sms:
         return gpu
     r = dataclasses.replace
-    sections = {"core": r(gpu.core, sms=sms), "raster": r(gpu.raster, quads_per_cycle=gpu.raster.quads_per_cycle * s),
-                "scoreboard": r(gpu.scoreboard, entries=max(gpu.core.warp_size, round(gpu.scoreboard.entries * s)))}
-    if gpu.l2.size_bytes:
-        sets = gpu.l2.size_bytes // (gpu.l2.line_bytes * gpu.l2.ways)
-        sections["l2"] = r(gpu.l2, size_bytes=max(1, round(sets * min(1.0, lines))) * gpu.l2.line_bytes * gpu.l2.ways)
-    return gpu.replace(**sections)
-
-
-def memory_path_addresses(gpu, parts) -> np.ndarray:
-    """Byte addresses of the operations among ``parts`` (``(op name, addresses)``) that go down the memory path
-    to the L2: the core's memory operations, and the ROPs' when they carry framebuffer traffic."""
-    ops = MEMORY_OPS | framebuffer_operations(gpu)
-    got = [np.asarray(a, np.int64) for op, a in parts if op in ops and len(a)]
-    every = np.concatenate(got) if got else np.zeros(0, np.int64)
-    return every[every < INDEX_BASE]     # not the software rasterizer's index and vertex buffers (whole blocks)
-
-
-def line_touches(gpu, address: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The L2 lines ``address`` touches (gpusim.hw.memory.l2.line_keys, ascending) and the touches of each."""
-    m = gpu.memory
-    return np.unique(line_keys(address, gpu.l2.line_bytes, m.interleave_bytes, m.partitions), return_counts=True)
-
-
-def warm_lines(every: tuple[np.ndarray, np.ndarray], kept: tuple[np.ndarray, np.ndarray], seed: int) -> np.ndarray:
-    """The lines whose first touch in a sample hits the L2 (``Program.l2_warm``): a line the run touches ``n``
-    times and the sample ``k`` times (``every``, ``kept``: :func:`line_touches` of the run and the sample) is first
-    brought in by one of the run's ``n`` touches, the sample's own with probability ``k / n``; otherwise the
-    touch of another thread brought it in, and the sample's first touch finds it (when the line is still in the
-    cache, which the scaled L2 decides). Drawn by a hash of the line, so the expected misses the sample scales
-    up are the run's compulsory misses: ``(k / n) / share`` per line, about one."""
-    lines, k = kept
-    at = np.minimum(np.searchsorted(every[0], lines), max(0, len(every[0]) - 1))
-    n = np.where(every[0][at] == lines, every[1][at], k) if len(every[0]) else k
-    return lines[hash32(lines, seed) >= (k / n * 2.0 ** 32)]
+    return gpu.replace(core=r(gpu.core, sms=sms), raster=r(gpu.raster, quads_per_cycle=gpu.raster.quads_per_cycle * s),
+                       scoreboard=r(gpu.scoreboard, entries=max(gpu.core.warp_size, round(gpu.scoreboard.entries * s))))
 
 
 def _stratified(weight: np.ndarray, present: np.ndarray, share: float, replicates: int,
@@ -429,7 +390,7 @@ def _replicate(work: Workload, rec: dict, passes: list[tuple[int, int]], rmw_kep
     return out
 
 
-def _replicate_program(work: Workload, gpu, reps: Replicates, r: int, pieces, passes=None, every_lines=None,
+def _replicate_program(work: Workload, gpu, reps: Replicates, r: int, pieces, passes=None, outcomes=None,
                        front=None, sms: int | None = None):
     """Replicate ``r``'s sample of the run (of its passes ``passes``, from ``pieces``), lowered for the share
     of the GPU it takes (``sms`` where it is known): (the machine's GPU, the program)."""
@@ -441,13 +402,7 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r: int, pieces, pa
     if fit != mine:
         mine, machine = fit, scaled_gpu(gpu, fit)
         program = lower(work, machine, keep, passes=passes, pieces=pieces)
-    warm = None
-    if every_lines is not None:          # the L2 holds the sample's share of the run's lines, warm where others
-        kept = line_touches(gpu, memory_path_addresses(          # bring a line in before the sample does
-            gpu, [(OPS[op], a) for u in program.row_sets.values() for op, a, _, _ in u.parts]))
-        machine = scaled_gpu(gpu, mine, len(kept[0]) / max(1, len(every_lines[0])))
-        warm = warm_lines(every_lines, kept, gpu.sample.seed + r)
-    program = dataclasses.replace(program, front_end_cycles=front, l2_warm=warm)
+    program = dataclasses.replace(program, front_end_cycles=front, l2_outcomes=outcomes)
     return machine, program
 
 
@@ -474,13 +429,13 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
     return out
 
 
-def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None, lines: bool = False):
+def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None):
     """:func:`gpusim.hw.lower.plan_pieces` of the run (of its passes ``passes``) for its replicates: only the rows
-    some replicate may keep (:meth:`Replicates.candidate_rows`), every operation counted in a census (with
-    its memory-path addresses where ``lines``); all of them, and no census, where a replicate is the run."""
+    some replicate may keep (:meth:`Replicates.candidate_rows`), every operation counted in a census; all of
+    them, and no census, where a replicate is the run."""
     if reps.share >= 1:
         return plan_pieces(work, passes), None
-    census = Census(work.plan, gpu, passes, lines)
+    census = Census(work.plan, gpu, passes)
     return _candidate_pieces(work, reps, passes, census), census
 
 
@@ -536,19 +491,18 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     if chunks is not None and gpu.l2.size_bytes:       # refused before the chunks are counted, not at the first
         raise carried_state(work, gpu)
     rmw_all = rmw_threads(work.plan, work)
-    pieces = census = every_lines = None     # every_lines: the run's L2 lines and touches of each (memory.l2)
+    pieces = outcomes = None
     if chunks is None:
-        pieces, census = _pieces(work, gpu, reps, None, lines=bool(gpu.l2.size_bytes))
-    if census is not None and census.addresses is not None:
-        every_lines = line_touches(gpu, memory_path_addresses(gpu, census.addresses))
-        census.addresses = None
+        pieces, _ = _pieces(work, gpu, reps, None)
+        if gpu.l2.size_bytes and share < 1:          # the run's L2 outcomes (functional warming)
+            outcomes = Outcomes(lower(work, gpu), gpu)
     runs: list[dict] = []
     machines: list[int] = []
     count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
     if chunks is None:
 
         def replicate(r: int, gpu=gpu) -> tuple[dict, int]:
-            machine, program = _replicate_program(work, gpu, reps, r, pieces, every_lines=every_lines, front=front)
+            machine, program = _replicate_program(work, gpu, reps, r, pieces, outcomes=outcomes, front=front)
             rec, _ = run_full(work, machine, program=program)
             return _replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
                               rmw_threads(program, work), rmw_all), machine.core.sms

@@ -20,19 +20,10 @@ import numpy as np
 
 from gpusim.config import param
 from gpusim.hw.memory.level import MemoryLevel, Requests
-from gpusim.hw.unit import (FP, BUSY, REQUESTS, UTILISATION, Stat, div, fp_costs, interleave, register_unit,
+from gpusim.hw.memory.warming import HIT, MISS_DIRTY, request_codes
+from gpusim.hw.unit import (FP, BUSY, REQUESTS, UTILISATION, Stat, div, fp_costs, register_unit,
                             within_instance)
 from gpusim.metrics.composite import run_starts
-
-
-#: an L2 line's key: its partition above this bit, its line number in the partition's share below
-WARM_SHIFT = 40
-
-
-def line_keys(address: np.ndarray, line_bytes: int, interleave_bytes: int, partitions: int) -> np.ndarray:
-    """The L2 line of each byte address, as one integer: partition ``<< WARM_SHIFT |`` line in its share."""
-    return ((interleave(address, interleave_bytes, partitions) << WARM_SHIFT)
-            | div(within_instance(address, interleave_bytes, partitions), line_bytes))
 
 
 @dataclass(frozen=True)
@@ -76,10 +67,9 @@ class L2Slice(MemoryLevel):
         # a sampled program (gpusim.hw.unit.occupancy): what the rest of the GPU's requests add to a slice after
         # the instruction that came with them, and that instruction
         self.after, self.last = [0] * self.instances, [-1] * self.instances
-        # a sample (gpusim.hw.sample.warm_lines): lines the run's other threads bring in before the sample's first
-        # touch, which that touch finds (once: a later miss on the line is the sample's own)
-        warm = getattr(self.program, "l2_warm", None)
-        self.warm = set(warm.tolist()) if warm is not None and len(warm) else None
+        # a sample (gpusim.hw.memory.warming): the run's outcome of each request, where the run has it
+        self.outcomes = getattr(self.program, "l2_outcomes", None)
+        self.gpu = machine.gpu
 
     @classmethod
     def present(cls, config: L2Config) -> bool:
@@ -100,15 +90,26 @@ class L2Slice(MemoryLevel):
                              self.next.request_costs(nbytes + self.line))
         held = [self.occupy(c, wi, part, c is cost) for c in (cost, miss, evict)]
         line = div(within_instance(address, *self.interleave), self.line)     # numbered in the slice's share
+        if self.outcomes is not None:
+            code = request_codes(self.program, self.gpu, self.outcomes, wi, address).tolist()
+        else:
+            code = [-1] * len(wi)
         reqs = list(zip(part.tolist(), line.tolist(), cost.tolist(), miss.tolist(),
-                        evict.tolist(), *(h.tolist() for h in held)))
+                        evict.tolist(), *(h.tolist() for h in held), code))
         first = wi[bounds[:-1]].tolist()
         w_ = write.tolist()
         for i, a, b in zip(first, bounds[:-1], bounds[1:]):
             self.table[i] = (reqs[a:b], w_[i])
 
-    def lookup(self, p: int, line: int, write: bool) -> tuple[bool, bool]:
-        """(hit, a dirty line was evicted) for one request; the line becomes the set's most recent."""
+    def lookup(self, p: int, line: int, write: bool, code: int = -1) -> tuple[bool, bool]:
+        """(hit, a dirty line was evicted) for one request; the line becomes the set's most recent. ``code``: a
+        sample's request's outcome in the run (gpusim.hw.memory.warming), which decides instead of the tags."""
+        if code >= 0:
+            if code == HIT:
+                self.hits[p] += 1
+                return True, False
+            self.misses[p] += 1
+            return False, code == MISS_DIRTY
         s = p * self.sets + line % self.sets
         tag = line // self.sets
         d = self.tags.get(s)
@@ -118,24 +119,19 @@ class L2Slice(MemoryLevel):
             d[tag] = d.pop(tag) or write
             self.hits[p] += 1
             return True, False
-        warm = self.warm is not None and (key := p << WARM_SHIFT | line) in self.warm
-        if warm:                     # the run's other threads brought it in: they, not the sample, paid for it
-            self.warm.remove(key)
-            self.hits[p] += 1
-        else:
-            self.misses[p] += 1
+        self.misses[p] += 1
         evict = False
         if len(d) >= self.ways:
             evict = d.pop(next(iter(d)))
         d[tag] = write
-        return warm, evict and not warm      # (as is the write-back of a dirty line a warm fill evicts)
+        return False, evict
 
     def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
         reqs, write = self.table[wi]
         free, busy, requests, nxt, latency = self.free, self.busy_fp, self.requests, self.next, self.latency
         done = 0
         after = self.after
-        for p, line, cost, miss_cost, evict_cost, held, miss_held, evict_held in reqs:
+        for p, line, cost, miss_cost, evict_cost, held, miss_held, evict_held, code in reqs:
             start = free[p]
             if after[p] and self.last[p] != wi:     # a sample: the rest of the GPU's requests that came with
                 start += after[p]                    # the instruction before
@@ -151,7 +147,7 @@ class L2Slice(MemoryLevel):
                 self.last[p] = wi
             busy[p] += cost
             requests[p] += 1
-            hit, evict = self.lookup(p, line, write)
+            hit, evict = self.lookup(p, line, write, code)
             if hit:
                 finish = -(-end // FP) + latency
             else:
