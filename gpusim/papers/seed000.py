@@ -13,6 +13,7 @@ outside the modelled passes (the driver, the CPU, the PBO draw).
 
 from __future__ import annotations
 
+import math
 from itertools import combinations
 
 import pandas as pd
@@ -192,7 +193,31 @@ def _pairs(results: pd.DataFrame, table: str, models, scenes: dict[str, str], ra
                                 sorted(rates, key=lambda m: -rates[m][i]), fps_of))
     return [*pairs, summary_row(table, f"pairs of modelled methods {WITHIN_1_5X} of the paper's ratio", pairs,
                                 PAIRS_TARGET),
+            _per_method_fit(results, table, models, scenes, rates, variants),
             *orders, summary_row(table, "models whose order of the methods is the paper's", orders)]
+
+
+def _per_method_fit(results: pd.DataFrame, table: str, models, scenes: dict[str, str], rates: dict[str, tuple],
+                    variants: dict[str, str]) -> PaperRow:
+    """A diagnostic, no target: the pairs within 1.5x once each method's frame rates are divided by one factor of
+    its own, the geometric mean of ours over the paper's across the models. What misses then differs from model
+    to model, which no change to one method's cost moves."""
+    quantity = f"pairs {WITHIN_1_5X} with each method's frame rates over its own fitted factor"
+    try:
+        ours = {m: [_fps(results, scenes[model], variants[m]) for model in models] for m in rates}
+    except Missing:
+        return PaperRow(table, quantity, "-", "not run in this experiment")
+    factor = {m: math.exp(sum(math.log(o / p) for o, p in zip(ours[m], rates[m])) / len(models)) for m in rates}
+    held = total = 0
+    for i in range(len(models)):
+        for a, b in combinations(rates, 2):
+            total += 1
+            held += WITHIN_1_5X.holds((ours[a][i] / factor[a]) / (ours[b][i] / factor[b]), rates[a][i] / rates[b][i])
+    return PaperRow(table, quantity, "-", f"{held} of {total} ({held / total:.0%})",
+                    "[derived] a diagnostic, not a target: the factor is the geometric mean of ours over the paper's "
+                    "across the models; the pairs that still miss differ from model to model, which no change to one "
+                    "method's cost can fix (the look-alikes share one fragment distribution, nested shells, and differ "
+                    "in their triangles only)")
 
 
 def _summary(results: pd.DataFrame) -> str:
