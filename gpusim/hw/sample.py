@@ -494,7 +494,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     pieces = outcomes = None
     if chunks is None:
         pieces, _ = _pieces(work, gpu, reps, None)
-        if gpu.l2.size_bytes and share < 1:          # the run's L2 outcomes (functional warming)
+        if gpu.l2.size_bytes and "l2" in gpu.memory.levels and share < 1:     # the run's L2 outcomes (warming)
             outcomes = Outcomes(lower(work, gpu), gpu)
     runs: list[dict] = []
     machines: list[int] = []
