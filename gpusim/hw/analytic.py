@@ -68,7 +68,7 @@ from gpusim.hw.driver import pass_overhead_cycles
 from gpusim.hw.lower import (PRODUCES, _quads_so_far, _raster_positions, fragment_warps, scoreboard_warps,
                              submitted_triangles, thread_mapping)
 from gpusim.hw.memory import SECTOR
-from gpusim.hw.memory.coalescer import WRITE_OPS
+from gpusim.hw.memory.coalescer import WRITE_OPS, touched_segments
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, per_triangle_cycles
 from gpusim.hw.rop import framebuffer_traffic
 from gpusim.hw.scoreboard import scoreboard_cell
@@ -190,9 +190,8 @@ def _requests(inst: np.ndarray, addr: np.ndarray, nbytes: np.ndarray, segment: i
         seg = np.concatenate((seg, seg[cross] + 1))
         nbytes = np.concatenate((first, addr[cross] + nbytes[cross] - cut))
     elif len(cross):
-        k = np.arange(int(span.sum())) - np.repeat(np.cumsum(span) - span, span)
+        _, seg = touched_segments(addr, nbytes, segment)
         inst, addr, nbytes = np.repeat(inst, span), np.repeat(addr, span), np.repeat(nbytes, span)
-        seg = np.repeat(seg, span) + k
         nbytes = np.minimum(addr + nbytes, (seg + 1) * segment) - np.maximum(addr, seg * segment)
     key, _ = _instruction_keys(inst, seg)
     same = len(nbytes) > 0 and not (nbytes != nbytes[0]).any()    # every access the same size: counts suffice

@@ -29,6 +29,27 @@ WRITE_OPS = ("store", "rmw_write")
 RMW_OPS = ("rmw_read", "rmw_write")
 
 
+def touched_segments(addr: np.ndarray, nbytes, segment: int) -> tuple[np.ndarray | None, np.ndarray]:
+    """The ``segment``-byte segments accesses of ``nbytes`` (at least 1) at ``addr`` touch: (per access its
+    number of segments, or None where each touches one; the segment of each piece, an access's ascending)."""
+    seg = div(addr, segment)
+    if not (mod(addr, segment) + nbytes > segment).any():
+        return None, seg
+    span = div(addr + nbytes - 1, segment) - seg + 1
+    k = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
+    return span, np.repeat(seg, span) + k
+
+
+def instruction_writes(program, framebuffer: bool) -> np.ndarray:
+    """Per instruction of ``program``: whether its requests write (dirty their lines): stores and RMW writes, and
+    where the ROPs' ``framebuffer`` traffic takes the memory path their operations (a read of each sector, then
+    its write)."""
+    write = np.isin(program.wi_op, [OPS.index(o) for o in WRITE_OPS])
+    if framebuffer and "rop" in program.units:
+        write[program.wi_unit == program.units.index("rop")] = True
+    return write
+
+
 @dataclass(frozen=True)
 class CoalescerConfig:
     """Coalescing of a warp's accesses into requests."""
@@ -59,7 +80,8 @@ class Coalescer(MemoryLevel):
         self.rmw_merged: list = []          # (instructions, starts) served in other processes (gpusim.hw.parallel)
         self.bytes = [0] * self.instances
         wis, counts, _ = prog.storage(self.name)
-        write = np.isin(prog.wi_op, [OPS.index(o) for o in WRITE_OPS])
+        from gpusim.hw.rop import framebuffer_traffic
+        write = instruction_writes(prog, framebuffer_traffic(machine.gpu))
         self._rmw = np.isin(prog.wi_op, [OPS.index(o) for o in RMW_OPS]).tolist()
         if any(self._rmw):
             self.rmw_starts = {}
@@ -70,7 +92,6 @@ class Coalescer(MemoryLevel):
             self.bytes = sum(np.bincount(q.partition, weights=q.nbytes, minlength=P) for q in chunks
                              ).astype(np.int64).tolist()
         # the ROPs' framebuffer traffic (gpusim.hw.rop) takes the same path from the next level on
-        from gpusim.hw.rop import framebuffer_traffic
         rop_wis, rop_counts, _ = prog.storage("rop") if framebuffer_traffic(machine.gpu) else ((), (), ())
         if len(rop_wis):
             order = np.concatenate([wis, rop_wis])
@@ -79,7 +100,6 @@ class Coalescer(MemoryLevel):
                 # a read of each sector, then its write (the blend, test or program's result)
                 chunks.append(Requests(np.repeat(q.rank + len(wis), 2), order, np.repeat(q.partition, 2),
                                        np.repeat(q.address, 2), np.repeat(q.nbytes, 2)))
-            write[rop_wis] = True
         if chunks:
             self.next.prepare(chunks, write)
 
@@ -114,13 +134,10 @@ class Coalescer(MemoryLevel):
             addr = address[r0:r1]
             nb = max(int(nbytes), 1) if np.isscalar(nbytes) else np.maximum(nbytes[r0:r1], 1)
             rank = np.repeat(np.arange(a + lo, a + hi), counts[a + lo:a + hi])
-            seg = div(addr, S)
-            if (mod(addr, S) + nb > S).any():       # an access wider than a segment touches several
+            span, seg = touched_segments(addr, nb, S)
+            if span is not None:                     # an access wider than a segment touches several
                 nb = np.broadcast_to(nb, addr.shape)
-                span = div(addr + nb - 1, S) - seg + 1
-                k = np.arange(span.sum()) - np.repeat(np.cumsum(span) - span, span)
                 rank, addr, nb = np.repeat(rank, span), np.repeat(addr, span), np.repeat(nb, span)
-                seg = np.repeat(seg, span) + k
                 nb = np.minimum(addr + nb, (seg + 1) * S) - np.maximum(addr, seg * S)
             # one request per (instruction, segment); lanes in address order (the common case) need no sort
             key = (rank << 36) | seg

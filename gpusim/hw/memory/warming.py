@@ -46,12 +46,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpusim.hw.memory.coalescer import instruction_writes, touched_segments
 from gpusim.hw.unit import div, interleave, mod, within_instance
 from gpusim.jit import compiled_once
-from gpusim.opplan import OPS
 
 HIT, MISS, MISS_DIRTY = 0, 1, 2          # a request's outcome
-WRITE_OPS = ("store", "rmw_write")       # operations that dirty their line (the ROPs' blends too)
 SEEN = 1024                              # distinct lines an instruction's outcomes are remembered for
 
 
@@ -61,9 +60,9 @@ class Segments:
     and tag."""
 
     def __init__(self, program, gpu):
-        from gpusim.hw.rop import framebuffer_traffic
         S, m, l2 = gpu.coalescer.segment_bytes, gpu.memory, gpu.l2
         self.sets = l2.size_bytes // (l2.line_bytes * l2.ways)
+        from gpusim.hw.rop import framebuffer_traffic
         units = ("coalescer", "rop") if framebuffer_traffic(gpu) else ("coalescer",)
         wis, counts, address, thread = [], [], [], []
         for unit in units:
@@ -71,14 +70,10 @@ class Segments:
             if not len(rows):
                 continue
             w, c, _ = program.storage(unit)
-            addr, nb = rows.address, rows.nbytes
-            first = div(addr, S)
-            span = div(addr + np.maximum(nb, 1) - 1, S) - first + 1       # the segments each row touches
+            span, first = touched_segments(rows.address, np.maximum(rows.nbytes, 1), S)
             th = rows.thread
-            if (span > 1).any():
-                at = np.cumsum(span) - span
-                k = np.arange(int(span.sum())) - np.repeat(at, span)
-                first, th = np.repeat(first, span) + k, np.repeat(th, span)
+            if span is not None:                     # a row wider than a segment touches several
+                th = np.repeat(th, span)
                 c = np.add.reduceat(span, np.cumsum(c) - c) if len(c) else c
             wis.append(w)
             counts.append(c)
@@ -95,10 +90,6 @@ class Segments:
         line = div(within_instance(address, m.interleave_bytes, m.partitions), l2.line_bytes)
         self.set = (part * self.sets + mod(line, self.sets)).astype(np.int32)
         self.tag = div(line, self.sets)
-        writes = np.isin(program.wi_op, [OPS.index(o) for o in WRITE_OPS])
-        if "rop" in program.units:                   # a blend reads its sector and writes it back
-            writes[program.wi_unit == program.units.index("rop")] = True
-        self.writes = writes
 
     def __len__(self) -> int:
         return len(self.wi)
@@ -207,13 +198,14 @@ class Outcomes:
         order = issue_order(program, gpu, segs.wis)
         code = np.zeros(len(segs), np.uint8)
         lanes = np.zeros(len(segs), np.uint16)
-        _kernel("lru", _lru_outcomes)(segs.lo[order], segs.hi[order], segs.set, segs.tag, segs.writes[segs.wis[order]],
+        from gpusim.hw.rop import framebuffer_traffic
+        writes = instruction_writes(program, framebuffer_traffic(gpu))[segs.wis[order]]
+        _kernel("lru", _lru_outcomes)(segs.lo[order], segs.hi[order], segs.set, segs.tag, writes,
                                       gpu.memory.partitions * segs.sets, gpu.l2.ways, code, lanes)
         # a line's miss spread over the instruction's segments (lanes) on it: a sample's request takes the
         # share of it its own lanes carry
         self.miss = np.where(code > 0, 1.0 / lanes, 0.0).astype(np.float32)
         self.dirty = code == MISS_DIRTY
-        self.requests, self.misses = len(segs), float(self.miss.sum())
         # the run's segments by thread, for a sample's operations to find theirs
         threads = int(segs.thread.max()) + 1 if len(segs) else 0
         self.offsets = np.append(0, np.cumsum(np.bincount(segs.thread, minlength=threads)))
@@ -229,16 +221,18 @@ class Outcomes:
         return out
 
 
+def _mix(h: np.ndarray, v) -> np.ndarray:
+    """``h`` combined with ``v`` (uint64) by splitmix64's finaliser."""
+    x = (h * np.uint64(0x9E3779B97F4A7C15)) ^ v
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
 def _request_key(wi: np.ndarray, address: np.ndarray, seed: int = 0) -> np.ndarray:
-    """A 64-bit key of each (instruction, segment address) (splitmix64's finaliser over the two)."""
+    """A 64-bit key of each (instruction, segment address), and with ``seed`` a draw from it."""
     with np.errstate(over="ignore"):
-        h = wi.astype(np.uint64) + np.uint64(seed)
-        for v in (address, np.zeros(1, np.uint64)):
-            x = (h * np.uint64(0x9E3779B97F4A7C15)) ^ v.astype(np.uint64)
-            x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-            x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-            h = x ^ (x >> np.uint64(31))
-        return h
+        return _mix(_mix(wi.astype(np.uint64) + np.uint64(seed), address.astype(np.uint64)), np.uint64(0))
 
 
 def request_codes(program, gpu, outcomes: Outcomes, wi: np.ndarray, address: np.ndarray) -> np.ndarray:
