@@ -164,9 +164,10 @@ def _lru_outcomes(lo, hi, set_of, tag_of, dirties, sets_total, ways, code, lanes
                     break
 
 
-def _run_segment(thread, group, k, set_of, tag_of, offsets, perm, r_wi, r_set, r_tag, wi_group, wi_k, out):
-    """For each of a sample's segments (its ``thread``, plan ``group``, loop iteration ``k``, set and tag): the
-    run's segment of the same operation and line (found among the run's segments of the thread,
+def _run_segment(thread, pass_of, group, k, set_of, tag_of, offsets, perm, r_wi, r_set, r_tag, wi_pass, wi_group,
+                 wi_k, out):
+    """For each of a sample's segments (its ``thread``, pass, plan ``group``, loop iteration ``k``, set and
+    tag): the run's segment of the same operation and line (found among the run's segments of the thread,
     ``perm[offsets[t]:offsets[t + 1]]``), or -1."""
     for s in range(len(thread)):
         t, c = thread[s], -1
@@ -174,8 +175,8 @@ def _run_segment(thread, group, k, set_of, tag_of, offsets, perm, r_wi, r_set, r
             for q in range(offsets[t], offsets[t + 1]):
                 j = perm[q]
                 w = r_wi[j]
-                if (r_set[j] == set_of[s] and r_tag[j] == tag_of[s] and wi_group[w] == group[s]
-                        and wi_k[w] == k[s]):
+                if (r_set[j] == set_of[s] and r_tag[j] == tag_of[s] and wi_pass[w] == pass_of[s]
+                        and wi_group[w] == group[s] and wi_k[w] == k[s]):
                     c = j
                     break
         out[s] = c
@@ -211,13 +212,16 @@ class Outcomes:
         self.offsets = np.append(0, np.cumsum(np.bincount(segs.thread, minlength=threads)))
         self.perm = np.argsort(segs.thread, kind="stable")
         self.wi, self.set, self.tag = segs.wi, segs.set, segs.tag
-        self.wi_group, self.wi_k = program.wi_group, program.wi_k
+        self.wi_pass, self.wi_group, self.wi_k = program.wi_pass, program.wi_group, program.wi_k
 
-    def of(self, thread, group, k, set_of, tag_of) -> np.ndarray:
-        """The run's segment of each of a sample's segments (-1: not an operation of the run)."""
+    def of(self, thread, pass_of, group, k, set_of, tag_of) -> np.ndarray:
+        """The run's segment of each of a sample's segments (-1: not an operation of the run): the same
+        thread's, in the same pass, plan group and loop iteration, on the same line (a thread that reads a
+        line in every pass of a multi-pass scheme finds each pass's own)."""
         out = np.full(len(thread), -1, np.int64)
-        _kernel("run_segment", _run_segment)(thread, group, k, set_of, tag_of, self.offsets, self.perm, self.wi,
-                                             self.set, self.tag, self.wi_group, self.wi_k, out)
+        _kernel("run_segment", _run_segment)(thread, pass_of, group, k, set_of, tag_of, self.offsets, self.perm,
+                                             self.wi, self.set, self.tag, self.wi_pass, self.wi_group, self.wi_k,
+                                             out)
         return out
 
 
@@ -243,7 +247,8 @@ def request_codes(program, gpu, outcomes: Outcomes, wi: np.ndarray, address: np.
     repeat (a ROP's write after its read); -1 where none of its lanes is an operation of the run (the
     slice's tags decide)."""
     segs = Segments(program, gpu)
-    run = outcomes.of(segs.thread, program.wi_group[segs.wi], program.wi_k[segs.wi], segs.set, segs.tag)
+    run = outcomes.of(segs.thread, program.wi_pass[segs.wi], program.wi_group[segs.wi], program.wi_k[segs.wi],
+                      segs.set, segs.tag)
     found = run >= 0
     mine = _request_key(segs.wi, segs.address)
     keys, slot = np.unique(mine, return_inverse=True)
