@@ -1,7 +1,10 @@
 """The sampled fidelity level (gpusim.hw.sample): replicate stratified samples on a GPU cut down to a share of its
-SMs, the 95% confidence interval from the replicates, and the whole run when the fraction is 1."""
+SMs, the 95% confidence interval from the replicates and the scale check, and the whole run when the fraction is 1."""
 
 from __future__ import annotations
+
+import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -65,6 +68,10 @@ def test_replicates_are_disjoint_stratified_samples(spheres):
     deepest = reps.tile_of(reps.deepest)
     assert overlap[deepest] == gpu.sample.replicates              # the deepest pixel's tile: in every replicate
     assert (np.delete(overlap, deepest) <= 1).all()               # the others: in one replicate at most
+    # the scale check's sample: replicates 0 and 1's together, pass by pass
+    groups = [np.arange(len(work.frag_pixel))]
+    pair = Keep(reps, (0, 1))(0, groups)[0]
+    assert (pair == (Keep(reps, 0)(0, groups)[0] | Keep(reps, 1)(0, groups)[0])).all() and pair.any()
 
 
 def test_a_sample_keeps_the_runs_load_on_each_shared_instance_and_word(spheres):
@@ -107,7 +114,39 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     assert "95% CI" in text and "the whole run, simulated once: its 60 tiles are too few" in text
     assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled",
                  "--gpu-set", "sample.min_tiles=1"]) == 0
-    assert "from 4 replicates of 1 SM each, 2 of 60 tiles" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "from 4 replicates of 1 SM each, 2 of 60 tiles" in text
+    assert "from replicates 0 and 1 together on 2 SMs" in text
+
+
+def test_the_scale_check_takes_a_pass_end_to_grow_as_the_log_of_the_sms():
+    # replicates 0 and 1 at 1,000 and 1,040 cycles on 2 SMs each, together 1,100 on 4, on a GPU of 32 SMs:
+    # beta = (1,100 - 1,020) / ln 2, and the replicates' bias -beta x ln(32 / 2) = -80 x 4 = -320 cycles
+    from gpusim.hw.sample import scale_check
+    check = scale_check(np.array([1000.0, 1040.0, 990.0, 1010.0]), [2, 2, 2, 2], ({"cycles": [600, 500]}, 4), 32)
+    assert check["bias_estimate"] == pytest.approx(-320.0)
+    assert (check["sms"], check["cycles"], check["pair_cycles"], check["pair_sms"]) == (4, 1100, 1020.0, 2.0)
+    assert scale_check(np.array([1000.0, 1040.0]), [2, 2], None, 32) is None
+
+
+@pytest.mark.parametrize("scheme", ["zbuffer", "freepipe-abuffer"])
+def test_the_interval_holds_the_replicates_spread_and_the_scale_checks_bias(spheres, scheme):
+    # the check runs replicates 0 and 1's samples together on their SMs together (their figures are its own,
+    # not in the estimate): the interval is the t interval of the replicates widened by the bias it gives
+    gpu = load_gpu("gtx280", ["runner.workers=1", "sample.min_tiles=1"])
+    on = replay(spheres, scheme, {}, "sampled", gpu)[1]["timing"]
+    off = replay(spheres, scheme, {}, "sampled", gpu.replace(
+        sample=dataclasses.replace(gpu.sample, scale_check=False)))[1]["timing"]
+    check, s = on["sample"]["scale_check"], on["sample"]
+    assert off["sample"]["scale_check"] is None and on["cycles"] == off["cycles"]
+    assert check["sms"] == 2 * s["replicate_sms"][0] and check["replicates"] == [0, 1]
+    assert check["pair_cycles"] == pytest.approx(np.mean(s["replicate_cycles"][:2]))
+    mean, half = np.mean(s["replicate_cycles"]), s["t_quantile"] * on["cycles_std_error"]
+    assert off["cycles_ci95_low"] == math.floor(min(off["cycles"], mean - half))
+    assert on["cycles_ci95_low"] == math.floor(min(on["cycles"], mean - half - abs(check["bias_estimate"])))
+    assert on["cycles_ci95_high"] == math.ceil(max(on["cycles"], mean + half + abs(check["bias_estimate"])))
+    assert on["cycle_error_estimate"] == pytest.approx(math.hypot(on["cycles_std_error"], check["bias_estimate"])
+                                                       / mean)
 
 
 def test_a_long_sampled_hold_is_waiting_not_a_deadlock():

@@ -150,10 +150,13 @@ def _timing_text(t: dict, add) -> None:
             f"sample.min_tiles = {s['min_tiles']} to cost less)")
     elif "cycles_ci95_low" in t:
         s = t["sample"]
+        check = s.get("scale_check")
+        scale = (f"; machine-size bias {check['bias_estimate'] / t['cycles']:+.2%} from replicates 0 and 1 "
+                 f"together on {counted(check['sms'], 'SM')}" if check and t["cycles"] else "")
         add(f"  95% CI     {t['cycles_ci95_low']:,} to {t['cycles_ci95_high']:,} cycles (error estimate "
-            f"{t['cycle_error_estimate']:.1%}: standard error over the cycles, from "
-            f"{counted(s['replicates'], 'replicate')} of {counted(s['sms'], 'SM')} each, "
-            f"{s['tiles_per_replicate']:,} of {counted(s['tiles'], 'tile')})")
+            f"{t['cycle_error_estimate']:.1%}: the replicates' standard error and the machine-size bias over "
+            f"the cycles, from {counted(s['replicates'], 'replicate')} of {counted(s['sms'], 'SM')} each, "
+            f"{s['tiles_per_replicate']:,} of {counted(s['tiles'], 'tile')}{scale})")
     for p in t["passes"][:12]:
         extra = f"  bound: {p['bound']}" if "bound" in p else ""
         add(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")

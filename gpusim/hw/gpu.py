@@ -62,13 +62,18 @@ class SampleConfig:
                             gt=0, max=1)
     replicates: int = param(4, unit="samples", doc="disjoint replicate samples; the estimate is their mean, its "
                             "95% confidence interval from their spread (Student's t with replicates - 1 degrees "
-                            "of freedom); the level costs about replicates x fraction of the full level", min=2,
+                            "of freedom) and the scale check's bias; the level costs about replicates x fraction "
+                            "of the full level (the check: 2 x fraction more)", min=2,
                             max=64)
     min_tiles: int = param(30, unit="tiles", doc="screen tiles with fragments a replicate samples at least: a run "
                            "with fewer than this many / fraction samples a larger share, on as many more SMs (all of "
                            "them, the run itself, for a run of at most replicates x this many tiles, where the "
                            "replicates would cost as much as the run)", min=1)
     seed: int = param(1, doc="random seed of the samples", min=0)
+    scale_check: bool = param(True, doc="also run replicates 0 and 1's samples together on their SMs together "
+                              "and widen the 95% interval by the bias of a replicate's machine size this gives "
+                              "(a pass's end, its latest SM's, taken to grow as the log of the SMs); costs about "
+                              "half of the replicates' event work more")
 
 
 register_section("runner", RunnerConfig)

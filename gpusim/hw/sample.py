@@ -47,12 +47,18 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   keeps one unit's threads (its latency chain is the pass's floor).
 * The estimate. Each replicate's pass cycles estimate the run's: the level
   reports their mean, per pass and in all, and from the replicates' totals
-  ``T_1..T_R`` the standard error ``SE = sd(T) / sqrt(R)``, the 95% confidence
-  interval ``mean +- t(0.975, R - 1) x SE`` (``cycles_ci95_low``,
-  ``cycles_ci95_high``) and ``cycle_error_estimate = SE / mean``. The interval
-  covers the sample's draw; the scaled machine's own bias (a pass's tail on
-  few SMs) is not in it: the fidelity corpus (configs/experiments/fidelity.toml)
-  measures how often it holds the full level's cycles.
+  ``T_1..T_R`` the standard error ``SE = sd(T) / sqrt(R)``. The replicates
+  share their machine's bias (a pass ends with the latest of fewer SMs than
+  the run's), which their spread does not show, so the scale check
+  (``sample.scale_check``) runs replicates 0 and 1's samples together on their
+  SMs together and takes the growth of a pass's end with the SMs from it
+  (:func:`scale_check`): the bias ``b``. The 95% confidence interval is
+  ``mean +- (t(0.975, R - 1) x SE + |b|)`` (``cycles_ci95_low``,
+  ``cycles_ci95_high``) and ``cycle_error_estimate = hypot(SE, b) / mean``;
+  the estimate itself is not corrected by ``b`` (on the fidelity corpus the
+  correction's sign was right in 70% of cases, and the corrected figures were
+  no closer). The corpus (configs/experiments/fidelity.toml) measures how
+  often the interval holds the full level's cycles.
 * Hazards, requests and busy cycles: each replicate's over the share of the
   work it kept (RMW fragments for hazards, operations for the units), averaged.
 
@@ -304,6 +310,8 @@ class Replicates:
         return self.lanes[p]
 
 
+#: the replicates whose samples together are the scale check's (run on their SMs together)
+SCALE_CHECK = (0, 1)
 #: how a pass's threads become lanes (gpusim.hw.lower.thread_mapping), as candidate_rows numbers them
 _MODES = ("thread", "fragment", "triangle")
 
@@ -312,12 +320,15 @@ class Keep:
     """Replicate ``r``'s choice of threads, as :func:`gpusim.hw.lower.lower` asks for it: per pass, whole
     screen tiles (graphics-pipeline fragment threads), whole blocks of triangles (a software rasterizer's), or
     whole warps of the run (threads that fill warps in order); a pass it would keep none of keeps one such
-    unit."""
+    unit. ``r`` a tuple of replicates: the union of their choices (the scale check's sample)."""
 
-    def __init__(self, reps: Replicates, r: int):
+    def __init__(self, reps: Replicates, r: int | tuple[int, ...]):
         self.reps, self.r = reps, r
 
     def __call__(self, p: int, threads: list[np.ndarray]) -> list[np.ndarray]:
+        if isinstance(self.r, tuple):
+            parts = [Keep(self.reps, r)(p, threads) for r in self.r]
+            return [np.logical_or.reduce(ms) for ms in zip(*parts)]
         reps, r = self.reps, self.r
         mapping = thread_mapping(reps.gpu, reps.work.plan.passes[p])
         units = reps.units_of(p, threads, mapping)
@@ -333,7 +344,8 @@ class Keep:
 
     def triangles(self, ids: np.ndarray) -> np.ndarray:
         """A software rasterizer's triangles (covering a pixel or not) in the replicate's triangle blocks."""
-        return self.reps.triangles[self.r][ids // self.reps.gpu.core.warp_size]
+        members = self.r if isinstance(self.r, tuple) else (self.r,)
+        return self.reps.triangles[list(members)].any(axis=0)[ids // self.reps.gpu.core.warp_size]
 
 
 def _distinct(values: np.ndarray) -> np.ndarray:
@@ -390,15 +402,21 @@ def _replicate(work: Workload, rec: dict, passes: list[tuple[int, int]], rmw_kep
     return out
 
 
-def _replicate_program(work: Workload, gpu, reps: Replicates, r: int, pieces, passes=None, outcomes=None,
+def _floor(reps: Replicates, r: int | tuple[int, ...]) -> int:
+    """The fewest SMs replicate ``r`` (a tuple: the union of those replicates) runs on."""
+    return min(reps.gpu.core.sms, reps.sms * (len(r) if isinstance(r, tuple) else 1))
+
+
+def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=None, outcomes=None,
                        front=None, sms: int | None = None):
-    """Replicate ``r``'s sample of the run (of its passes ``passes``, from ``pieces``), lowered for the share
-    of the GPU it takes (``sms`` where it is known): (the machine's GPU, the program)."""
+    """Replicate ``r``'s sample of the run (a tuple: the union of those replicates'; of its passes ``passes``,
+    from ``pieces``), lowered for the share of the GPU it takes (``sms`` where it is known): (the machine's
+    GPU, the program)."""
     keep = Keep(reps, r)
-    mine = reps.sms if sms is None else sms
+    mine = _floor(reps, r) if sms is None else sms
     machine = scaled_gpu(gpu, mine)
     program = lower(work, machine, keep, passes=passes, pieces=pieces)
-    fit = mine if sms is not None else replicate_sms(gpu, program, reps.sms)    # the share the kept work takes
+    fit = mine if sms is not None else replicate_sms(gpu, program, mine)    # the share the kept work takes
     if fit != mine:
         mine, machine = fit, scaled_gpu(gpu, fit)
         program = lower(work, machine, keep, passes=passes, pieces=pieces)
@@ -462,20 +480,40 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     return out
 
 
-def _chunked_sms(work: Workload, gpu, reps: Replicates, count: int, chunks: list[tuple[int, int]]) -> list[int]:
-    """The SMs of each of the first ``count`` replicates of a run sampled a chunk of passes at a time: as
-    :func:`replicate_sms` gives for its sample of the whole run (one machine size for every chunk, as when the
-    run is lowered at once), from the operations its sample keeps of each chunk's."""
-    kept, total = [0] * count, 0
+def _chunked_sms(work: Workload, gpu, reps: Replicates, members: list, chunks: list[tuple[int, int]]) -> list[int]:
+    """The SMs of each replicate of ``members`` (a tuple: the union of those replicates) of a run sampled a
+    chunk of passes at a time: as :func:`replicate_sms` gives for its sample of the whole run (one machine
+    size for every chunk, as when the run is lowered at once), from the operations its sample keeps of each
+    chunk's."""
+    kept, total = [0] * len(members), 0
     for first, end in chunks:
         pieces = (_candidate_pieces(work, reps, (first, end), None) if reps.share < 1    # no census: counts only
                   else plan_pieces(work, (first, end)))
         total += int(pieces.totals.sum()) if pieces.totals is not None else sum(pc.operations for pc in pieces)
-        for r in range(count):
+        for i, r in enumerate(members):
             masks = sample_masks(pieces, Keep(reps, r), first)
-            kept[r] += sum(int(np.count_nonzero(m)) for pc, m in zip(pieces, masks) if pc.instructions is None)
+            kept[i] += sum(int(np.count_nonzero(m)) for pc, m in zip(pieces, masks) if pc.instructions is None)
         del pieces
-    return [fitted_sms(gpu, k, total, reps.sms) for k in kept]
+    return [fitted_sms(gpu, k, total, _floor(reps, r)) for k, r in zip(kept, members)]
+
+
+def scale_check(totals: np.ndarray, machines: list[int], check_run: tuple[dict, int] | None,
+                sms: int) -> dict | None:
+    """The scale check's figures: from the replicates' cycles ``totals`` on their SMs ``machines`` and the
+    check's (record, SMs) ``check_run`` (None: no check) on a GPU of ``sms`` SMs, the bias of a replicate's
+    machine size. A pass ends with its last SM, and the latest of ``m`` SMs' finishing times grows as
+    ``beta x ln m`` (the extreme-value law of tails no heavier than exponential), so the members' mean
+    cycles ``T_p`` on ``m_p`` SMs and the check's ``T_u`` on ``m_u`` give ``beta = (T_u - T_p) / ln(m_u /
+    m_p)`` and the replicates' bias against the run on all the SMs ``-beta x ln(sms / m_p)``."""
+    if check_run is None:
+        return None
+    rec, mu = check_run
+    pair = list(SCALE_CHECK)
+    tp, mp = float(np.mean(totals[pair])), float(np.mean([machines[i] for i in pair]))
+    tu = float(sum(rec["cycles"]))
+    bias = (tp - tu) * math.log(sms / mp) / math.log(mu / mp) if mu > mp else 0.0
+    return {"replicates": pair, "sms": int(mu), "cycles": int(round(tu)), "pair_cycles": tp,
+            "pair_sms": mp, "bias_estimate": bias}
 
 
 def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict, None]:
@@ -499,9 +537,11 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     runs: list[dict] = []
     machines: list[int] = []
     count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
+    # the scale check: replicates 0 and 1's samples together on their SMs together (its own figures)
+    members = list(range(count)) + ([SCALE_CHECK] if count > 1 and gpu.sample.scale_check else [])
     if chunks is None:
 
-        def replicate(r: int, gpu=gpu) -> tuple[dict, int]:
+        def replicate(r, gpu=gpu) -> tuple[dict, int]:
             machine, program = _replicate_program(work, gpu, reps, r, pieces, outcomes=outcomes, front=front)
             rec, _ = run_full(work, machine, program=program)
             return _replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
@@ -509,35 +549,38 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
 
         # the replicates are independent: one per process where the CPUs and their size allow (each then
         # replays its passes serially); the figures are the same
-        workers = fork_workers(gpu.runner.workers, count, share * work.plan.total_ops(), MIN_REPLICATE_OPERATIONS)
+        workers = fork_workers(gpu.runner.workers, len(members), share * work.plan.total_ops(),
+                               MIN_REPLICATE_OPERATIONS)
         done = None
         if workers > 1:                          # what the replicates share, counted once before the fork
             share_pieces(pieces, work.plan, gpu, len(work.plan.passes))
             reps.prepare(pieces)
             serial = gpu.replace(runner=dataclasses.replace(gpu.runner, workers=1))
-            done = fork_map(lambda r: replicate(r, serial), list(range(count)), workers)
+            done = fork_map(lambda r: replicate(r, serial), members, workers)
         if done is None:
-            done = [replicate(r) for r in range(count)]
+            done = [replicate(r) for r in members]
         runs, machines = [d[0] for d in done], [d[1] for d in done]
     else:                                    # a chunk of passes at a time, each replicate's sample of each
-        fit = _chunked_sms(work, gpu, reps, count, chunks)
-        streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in range(count)]
-        ops: list[list] = [[] for _ in range(count)]
-        readers: list[list] = [[] for _ in range(count)]
+        fit = _chunked_sms(work, gpu, reps, members, chunks)
+        streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in members]
+        ops: list[list] = [[] for _ in members]
+        readers: list[list] = [[] for _ in members]
         for first, end in chunks:
             pieces, _ = _pieces(work, gpu, reps, (first, end))
-            for r in range(count):
+            for i, r in enumerate(members):
                 machine, program = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
-                                                      sms=fit[r])
-                streams[r].replay(machine, program, first)
-                ops[r] += [(p.operations, p.operations_total) for p in program.passes]
-                readers[r].append(_rmw_readers(program))
+                                                      sms=fit[i])
+                streams[i].replay(machine, program, first)
+                ops[i] += [(p.operations, p.operations_total) for p in program.passes]
+                readers[i].append(_rmw_readers(program))
                 del program
             del pieces
-        for r in range(count):
-            rec, _ = streamed_record(work, gpu, streams[r])
-            runs.append(_replicate(work, rec, ops[r], rmw_threads(np.concatenate(readers[r]), work), rmw_all))
-            machines.append(fit[r])
+        for i in range(len(members)):
+            rec, _ = streamed_record(work, gpu, streams[i])
+            runs.append(_replicate(work, rec, ops[i], rmw_threads(np.concatenate(readers[i]), work), rmw_all))
+            machines.append(fit[i])
+    check_run = (runs[count], machines[count]) if len(members) > count else None
+    runs, machines = runs[:count], machines[:count]
     runs += runs[:1] * (reps.count - count)
     machines += machines[:1] * (reps.count - count)
     n = len(runs)
@@ -558,10 +601,12 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
            "units": _units(runs, gpu, cycles)}
     for key in ("rmw_hazards", "rmw_hazard_pixels"):
         rec[key] = int(round(np.mean([run[key] for run in runs])))
-    rec["cycles_ci95_low"] = int(math.floor(min(cycles, mean - t * se)))
-    rec["cycles_ci95_high"] = int(math.ceil(max(cycles, mean + t * se)))
+    check = scale_check(totals, machines, check_run, gpu.core.sms)
+    bias = abs(check["bias_estimate"]) if check else 0.0
+    rec["cycles_ci95_low"] = int(math.floor(min(cycles, mean - t * se - bias)))
+    rec["cycles_ci95_high"] = int(math.ceil(max(cycles, mean + t * se + bias)))
     rec["cycles_std_error"] = se
-    rec["cycle_error_estimate"] = se / mean if mean else 0.0
+    rec["cycle_error_estimate"] = math.hypot(se, bias) / mean if mean else 0.0
     if chunks is not None:
         rec["streamed"] = {"chunks": len(chunks), "passes": [list(c) for c in chunks]}
     rec["sample"] = {"tile": gpu.sample.tile, "fraction": gpu.sample.fraction, "min_tiles": gpu.sample.min_tiles,
@@ -569,7 +614,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
                      "replicates": n, "sms": sms, "replicate_sms": machines, "share": share, "t_quantile": t,
                      **reps.info,
                      "operations_sampled": [int(run["operations_sampled"]) for run in runs],
-                     "replicate_cycles": [int(x) for x in totals]}
+                     "replicate_cycles": [int(x) for x in totals], "scale_check": check}
     rec["event_seconds"] = time.perf_counter() - start
     rec["cycles"] = int(cycles)
     rec["microseconds"] = cycles / gpu.core.clock_mhz

@@ -285,10 +285,12 @@ class _Report:
             self.add("#### The sampled level's 95% confidence interval", "",
                      f"The full level's cycles lie inside the sampled run's 95% interval in {int(inside.sum())} of "
                      f"{len(sampled)} cases ({inside.mean():.1%}; the target is 95%). The interval is the "
-                     "replicates' spread (Student's t); the median error estimate (standard error over the "
-                     f"cycles) is {fmt(sampled['error_estimate'].median(), 'share')} against a median |cycle "
+                     "replicates' spread (Student's t) widened, where `sample.scale_check` is on (the default), by "
+                     "the bias of the replicates' smaller machine that the check measures; the median error "
+                     "estimate (the standard error and that bias, over the cycles) is "
+                     f"{fmt(sampled['error_estimate'].median(), 'share')} against a median |cycle "
                      f"error| of {fmt(sampled['cycle_error'].abs().median(), 'share')}: where the error is larger "
-                     "than the interval, it is the scaled-down machine's bias, which the replicates share.", "")
+                     "than the interval, it is a bias of the sample that the check does not see.", "")
             whole = sampled["run"].isin(whole_samples(self.stats))
             if whole.any():
                 rest = sampled[~whole]
