@@ -51,7 +51,8 @@ def _stats() -> pd.DataFrame:
                      (f"{run}-analytic", "machine", "pass_cycles", "pass=b,index=1,kind=fullscreen,bound=dram", 100)]
             rows += [(f"{run}-sampled", "sample", key, "", value)
                      for key, value in (("replicates", 4), ("sms", 1), ("share", 1 / 30), ("tiles", 64),
-                                        ("tiles_per_replicate", 2))]
+                                        ("tiles_per_replicate", 2), ("scale_check_sms", 2), ("scale_bias", -5.4))]
+            rows += [(f"{run}-sampled", "machine", "cycles", "", 540.0)]
     # an L2 on the big z-buffer's runs: the sample's is half again as busy and hits 95% against 90%
     rows += [("big-zbuffer-full", "memory.l2", stat, f"instance={i}", value) for i in range(2)
              for stat, value in (("busy_cycles", 100.0), ("hits", 90.0), ("misses", 10.0))]
@@ -111,6 +112,7 @@ def test_misses_say_what_decided_them(errors):
     assert misses.loc[("analytic", "big gtx280", "kbuffer"), "decided by"] == "latency 90%, dram 10%"
     sampled = misses.loc[("sampled", "big gtx280", "zbuffer")]
     assert sampled["missed"] == "error and interval" and "4 x 1 SM" in sampled["decided by"]
+    assert "2 of 64 tiles each; scale check on 2 SM: machine-size bias -1.00%" in sampled["decided by"]
     # the units furthest from the full run's busy cycles (over 5%), the furthest first, and the L2's hit rates
     assert sampled["decided by"].endswith("; busy against full: l2 +50%; L2 hits 95.0% (full 90.0%)")
 

@@ -147,6 +147,10 @@ def test_the_interval_holds_the_replicates_spread_and_the_scale_checks_bias(sphe
     assert on["cycles_ci95_high"] == math.ceil(max(on["cycles"], mean + half + abs(check["bias_estimate"])))
     assert on["cycle_error_estimate"] == pytest.approx(math.hypot(on["cycles_std_error"], check["bias_estimate"])
                                                        / mean)
+    # an experiment's stats table holds the check's SMs and bias
+    from gpusim.experiment.execute import timing_stat_rows
+    rows = {r["stat"]: r["value"] for r in timing_stat_rows(on) if r["unit"] == "sample"}
+    assert rows["scale_check_sms"] == check["sms"] and rows["scale_bias"] == pytest.approx(check["bias_estimate"])
 
 
 def test_a_long_sampled_hold_is_waiting_not_a_deadlock():

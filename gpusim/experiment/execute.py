@@ -195,6 +195,12 @@ def timing_stat_rows(timing: dict) -> list[dict]:
                                  ("tiles_per_replicate", "tiles", "screen tiles each replicate samples")):
         if key in sample:                       # the sampled level's sample
             rows.append(_stat("sample", key, sample[key], value_unit, doc))
+    check = sample.get("scale_check")
+    if check:                                   # and its scale check
+        rows.append(_stat("sample", "scale_check_sms", check["sms"], "SMs",
+                          "SMs of the scale check (replicates 0 and 1's samples together)"))
+        rows.append(_stat("sample", "scale_bias", check["bias_estimate"], "cycles",
+                          "the replicates' machine-size bias the scale check gives (in the 95% interval)"))
     for key in ("memory_cycles", "compute_cycles"):
         if key in timing:
             rows.append(_stat("machine", key, timing[key], "cycles", f"thesis model: {key.replace('_', ' ')}"))
