@@ -56,7 +56,7 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   ``mean +- (t(0.975, R - 1) x SE + |b|)`` (``cycles_ci95_low``,
   ``cycles_ci95_high``) and ``cycle_error_estimate = hypot(SE, b) / mean``;
   the estimate itself is not corrected by ``b`` (on the fidelity corpus the
-  correction's sign was right in 70% of cases, and the corrected figures were
+  correction's sign was right in 71% of cases, and the corrected figures were
   no closer). The corpus (configs/experiments/fidelity.toml) measures how
   often the interval holds the full level's cycles.
 * Hazards, requests and busy cycles: each replicate's over the share of the
@@ -324,12 +324,13 @@ class Keep:
 
     def __init__(self, reps: Replicates, r: int | tuple[int, ...]):
         self.reps, self.r = reps, r
+        self.members = _members(r)
 
     def __call__(self, p: int, threads: list[np.ndarray]) -> list[np.ndarray]:
-        if isinstance(self.r, tuple):
-            parts = [Keep(self.reps, r)(p, threads) for r in self.r]
+        if len(self.members) > 1:
+            parts = [Keep(self.reps, r)(p, threads) for r in self.members]
             return [np.logical_or.reduce(ms) for ms in zip(*parts)]
-        reps, r = self.reps, self.r
+        reps, r = self.reps, self.members[0]
         mapping = thread_mapping(reps.gpu, reps.work.plan.passes[p])
         units = reps.units_of(p, threads, mapping)
         chosen = (reps.triangles if mapping == "triangle" else reps.tiles if mapping == "fragment"
@@ -344,8 +345,12 @@ class Keep:
 
     def triangles(self, ids: np.ndarray) -> np.ndarray:
         """A software rasterizer's triangles (covering a pixel or not) in the replicate's triangle blocks."""
-        members = self.r if isinstance(self.r, tuple) else (self.r,)
-        return self.reps.triangles[list(members)].any(axis=0)[ids // self.reps.gpu.core.warp_size]
+        return self.reps.triangles[list(self.members)].any(axis=0)[ids // self.reps.gpu.core.warp_size]
+
+
+def _members(r: int | tuple[int, ...]) -> tuple[int, ...]:
+    """The replicates a sample ``r`` is made of: itself, or the tuple's (the scale check's union)."""
+    return r if isinstance(r, tuple) else (r,)
 
 
 def _distinct(values: np.ndarray) -> np.ndarray:
@@ -404,7 +409,7 @@ def _replicate(work: Workload, rec: dict, passes: list[tuple[int, int]], rmw_kep
 
 def _floor(reps: Replicates, r: int | tuple[int, ...]) -> int:
     """The fewest SMs replicate ``r`` (a tuple: the union of those replicates) runs on."""
-    return min(reps.gpu.core.sms, reps.sms * (len(r) if isinstance(r, tuple) else 1))
+    return min(reps.gpu.core.sms, reps.sms * len(_members(r)))
 
 
 def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=None, outcomes=None,

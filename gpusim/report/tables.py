@@ -221,7 +221,8 @@ def sample_sizes(stats: pd.DataFrame) -> dict[str, str]:
     """Per sampled run: its sample (replicates of how many SMs, tiles per replicate of how many) and its scale
     check's SMs and bias (over the run's cycles)."""
     sel = stats[stats["unit"] == "sample"]
-    cycles = stats[(stats["unit"] == "machine") & (stats["stat"] == "cycles")].drop_duplicates("run").set_index("run")["value"]
+    cycles = stats[(stats["unit"] == "machine") & (stats["stat"] == "cycles")]
+    cycles = cycles.drop_duplicates("run").set_index("run")["value"]
     out = {}
     for run, part in sel.groupby("run", sort=False):
         v = dict(zip(part["stat"], part["value"]))
