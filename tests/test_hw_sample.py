@@ -117,6 +117,11 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     text = capsys.readouterr().out
     assert "from 4 replicates of 1 SM each, 2 of 60 tiles" in text
     assert "from replicates 0 and 1 together on 2 SMs" in text
+    assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled",
+                 "--gpu-set", "sample.min_tiles=1", "--gpu-set", "sample.scale_check=false"]) == 0
+    text = capsys.readouterr().out
+    assert "(error estimate" in text and ": standard error over the cycles, from 4 replicates" in text
+    assert "machine-size bias" not in text
 
 
 def test_the_scale_check_takes_a_pass_end_to_grow_as_the_log_of_the_sms():

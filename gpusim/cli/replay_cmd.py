@@ -153,8 +153,9 @@ def _timing_text(t: dict, add) -> None:
         check = s.get("scale_check")
         scale = (f"; machine-size bias {check['bias_estimate'] / t['cycles']:+.2%} from replicates 0 and 1 "
                  f"together on {counted(check['sms'], 'SM')}" if check and t["cycles"] else "")
+        what = "the replicates' standard error and the machine-size bias" if check else "standard error"
         add(f"  95% CI     {t['cycles_ci95_low']:,} to {t['cycles_ci95_high']:,} cycles (error estimate "
-            f"{t['cycle_error_estimate']:.1%}: the replicates' standard error and the machine-size bias over "
+            f"{t['cycle_error_estimate']:.1%}: {what} over "
             f"the cycles, from {counted(s['replicates'], 'replicate')} of {counted(s['sms'], 'SM')} each, "
             f"{s['tiles_per_replicate']:,} of {counted(s['tiles'], 'tile')}{scale})")
     for p in t["passes"][:12]:
