@@ -121,7 +121,11 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
                  "--gpu-set", "sample.min_tiles=1", "--gpu-set", "sample.scale_check=false"]) == 0
     text = capsys.readouterr().out
     assert "(error estimate" in text and ": standard error over the cycles, from 4 replicates" in text
-    assert "machine-size bias" not in text
+    assert "machine-size bias" not in text and "thinned" not in text
+    assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled", "--gpu-set", "sample.tile=4",
+                 "--gpu-set", "sample.min_tiles=1", "--gpu-set", "sample.thin=0.25",
+                 "--gpu-set", "sample.thin_min_tiles=1"]) == 0
+    assert "of their SMs' work and extrapolated to the whole by the work check" in capsys.readouterr().out
 
 
 def test_the_scale_check_takes_a_pass_end_to_grow_as_the_log_of_the_sms():
@@ -132,6 +136,75 @@ def test_the_scale_check_takes_a_pass_end_to_grow_as_the_log_of_the_sms():
     assert check["bias_estimate"] == pytest.approx(-320.0)
     assert (check["sms"], check["cycles"], check["pair_cycles"], check["pair_sms"]) == (4, 1100, 1020.0, 2.0)
     assert scale_check(np.array([1000.0, 1040.0]), [2, 2], None, 32) is None
+
+
+def test_a_replicate_is_thinned_only_where_it_keeps_enough_tiles():
+    from gpusim.hw.sample import thinning
+    gpu = load_gpu("gtx280", ["sample.thin=0.25"])               # 30 SMs, thin_min_tiles 16
+    # a replicate on 1 SM of 2,304 tiles keeps 76.8 a share; a quarter of that is over 16 tiles
+    assert thinning(gpu, 2304, 1) == 0.25
+    assert thinning(gpu, 1000, 1) == pytest.approx(16 / (1000 / 30))      # raised to keep 16 tiles: 0.48
+    assert thinning(gpu, 900, 1) == 1.0                  # 0.53: over 0.5, the work check would cost the gain
+    assert thinning(gpu, 2304, 30) == 1.0                # the replicate is the run
+    assert thinning(load_gpu("gtx280"), 2304, 1) == 1.0   # off by default
+
+
+def test_the_work_check_extrapolates_each_pass_linearly_to_the_whole_work():
+    # four replicates thinned to a quarter of pass 0 (pass 1 kept whole); replicates 0 and 1 together, at half,
+    # take 180 cycles: the slope is (180 - 105) / (0.5 - 0.25) = 300 cycles per whole work, so each replicate's
+    # pass 0 gains 300 x 0.75 = 225; the slopes against replicate 0 or 1 alone are 320 and 280, so the slope's
+    # standard error on a total is (320 - 280) / 2 x 0.75 = 15
+    from gpusim.hw.sample import work_check
+    cycles = np.array([[100.0, 50], [110, 50], [105, 50], [95, 50]])
+    theta = np.array([[0.25, 1.0]] * 4)
+    slope, se, info = work_check(cycles, theta, (np.array([180.0, 50]), np.array([0.5, 1.0])))
+    assert slope.tolist() == [300, 0] and se == pytest.approx(15)
+    assert (cycles + slope * (1 - theta))[:, 0].tolist() == [325, 335, 330, 320]
+    assert info["cycles"] == 230 and info["pair_cycles"] == 155
+    assert work_check(cycles, theta, None)[:2] == (pytest.approx([0, 0]), 0.0)
+
+
+def test_a_thinned_sample_stands_for_the_gpu_on_a_thinned_frame(spheres):
+    # a replicate that keeps a share theta of its SMs' work: the shared units' load from the rest of the GPU,
+    # the atomic words' chains and the front end's cycles per triangle are theta of the run's
+    from gpusim.hw.raster import per_triangle_cycles
+    from gpusim.hw.sample import thinned
+    gpu = load_gpu("gtx280", ["sample.thin=0.25", "sample.thin_min_tiles=1", "sample.min_tiles=1", "sample.tile=4"])
+    for scheme in ("linked-list", "zbuffer"):
+        work = Workload.of(run_functional(spheres, scheme, {})[0], spheres)
+        reps = Replicates(work, gpu, 1 / 30 / 4)
+        program = lower(work, scaled_gpu(gpu, 1), Keep(reps, 0), pieces=plan_pieces(work))
+        thin, theta = thinned(program, gpu, 1)
+        share = np.array([p.operations / p.operations_total * 30 for p in program.passes])
+        assert np.allclose(theta, np.minimum(share, 1)) and (theta < 1).any()
+        for name, factor in program.occupancy.items():
+            assert np.allclose(thin.occupancy[name], np.maximum(factor * theta[:, None], 1)), name
+        assert thin.front_end_cycles == pytest.approx(list(per_triangle_cycles(gpu) * theta))
+        if program.hold_scale is not None:
+            row_pass = program.wi_pass[program.storage("atomic")[2]]
+            assert np.allclose(thin.hold_scale, np.maximum(program.hold_scale * theta[row_pass], 1))
+
+
+@pytest.mark.parametrize("scheme", ["zbuffer", "linked-list"])
+def test_a_thinned_sampled_run_extrapolates_to_the_whole_work(spheres, scheme):
+    # thinning off (the default) is the sampled level as it was; on, the replicates keep a share of their SMs'
+    # work, the work check runs replicates 0 and 1 together on one SM, and each pass's cycles are extrapolated
+    # from the two to the whole work
+    base = ["runner.workers=1", "sample.min_tiles=1", "sample.tile=4"]
+    full = replay(spheres, scheme, {}, "full", load_gpu("gtx280", base))[1]["timing"]
+    off = replay(spheres, scheme, {}, "sampled", load_gpu("gtx280", base))[1]["timing"]
+    on = replay(spheres, scheme, {}, "sampled", load_gpu("gtx280", base + ["sample.thin=0.25",
+                                                                          "sample.thin_min_tiles=1"]))[1]["timing"]
+    assert off["sample"]["thin"] == 1 and off["sample"]["work_check"] is None
+    assert off["sample"]["replicate_thinning"] == pytest.approx([1] * 4, abs=0.5)
+    s = on["sample"]
+    assert 0.25 <= s["thin"] <= 0.5 and s["share"] == pytest.approx(s["thin"] / 30)
+    assert all(0 < t < 1 for t in s["replicate_thinning"]) and s["work_check"]["replicates"] == [0, 1]
+    assert on["cycles"] == sum(p["cycles"] for p in on["passes"])
+    assert on["cycles_ci95_low"] <= on["cycles"] <= on["cycles_ci95_high"]
+    assert 0.8 < on["cycles"] / full["cycles"] < 1.25
+    # the thinned replicates' own cycles are the thinned frame's: shorter than the extrapolated figure
+    assert s["work_check"]["pair_cycles"] < on["cycles"]
 
 
 @pytest.mark.parametrize("scheme", ["zbuffer", "freepipe-abuffer"])

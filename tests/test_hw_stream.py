@@ -114,11 +114,24 @@ def test_a_sampled_run_over_max_operations_is_sampled_a_chunk_at_a_time(small, s
     """The sampled level takes what the full level streams: each replicate's sample of each chunk of passes,
     on a machine of its own (of the SMs its sample of the whole run takes), gives the figures of its sample
     of the whole run."""
+    _same_sampled_figures_streamed(small, scheme, params, [])
+
+
+@pytest.mark.parametrize("scheme, params", [("depth-peeling", {}), ("kbuffer", {"k": 8})])
+def test_a_thinned_sampled_run_is_the_same_streamed(small, scheme, params):
+    """Thinned replicates and the work check (gpusim.hw.sample.thinned) give the same figures a chunk of passes
+    at a time."""
+    rec = _same_sampled_figures_streamed(small, scheme, params, ["sample.thin=0.25", "sample.thin_min_tiles=1", "sample.tile=4"])
+    assert rec["sample"]["thin"] < 1 and rec["sample"]["work_check"] is not None
+
+
+def _same_sampled_figures_streamed(small, scheme, params, options) -> dict:
     result = make_scheme(scheme, params).run(small)
     reference = composite_exact(small)
     out = []
     for limit in (10**9, limit_for(result, small, 0.3), limit_for(result, small, 0.0)):
-        gpu = load_gpu("gtx280", ["runner.workers=1", f"runner.max_operations={limit}", "sample.min_tiles=1"])
+        gpu = load_gpu("gtx280", ["runner.workers=1", f"runner.max_operations={limit}", "sample.min_tiles=1",
+                                  *options])
         rec, _ = FIDELITIES["sampled"](result, small, gpu, reference)
         rec.pop("event_seconds")
         streamed = rec.pop("streamed", None)
@@ -128,3 +141,4 @@ def test_a_sampled_run_over_max_operations_is_sampled_a_chunk_at_a_time(small, s
         out.append(rec)
     assert out[0] == out[1] == out[2]
     assert out[0]["sample"]["share"] < 1 and out[0]["cycles_ci95_low"] < out[0]["cycles_ci95_high"]
+    return out[0]

@@ -156,12 +156,13 @@ class Program:
     # partitions' levels, "atomic", "rop"), a (passes, instances) array: the run's load on each instance in each
     # pass over the sample's (gpusim.hw.unit.occupancy). ``hold_scale``: per atomic row, the run's
     # operations on its word in its pass over the sample's (a word's chain as long as in the run).
-    # ``front_end_cycles``: cycles per triangle of the whole GPU's front end. ``l2_outcomes``: the run's L2
+    # ``front_end_cycles``: cycles per triangle of the whole GPU's front end (a list: per pass, a thinned
+    # sample's). ``l2_outcomes``: the run's L2
     # outcome of each of its requests, which the sample's requests take (gpusim.hw.memory.warming). None: a
     # whole run.
     occupancy: dict[str, np.ndarray] | None = field(repr=False, default=None)
     hold_scale: np.ndarray | None = field(repr=False, default=None)
-    front_end_cycles: float | None = None
+    front_end_cycles: float | list[float] | None = None
     l2_outcomes: object | None = field(repr=False, default=None)
 
     @property

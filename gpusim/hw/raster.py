@@ -218,9 +218,10 @@ class Rasterizer(Unit):
         super().__init__(1)
         prog = machine.program
         # a sampled program's front end is the whole GPU's: every pass submits all its triangles (the sampled
-        # warps wait for theirs), and only its quads are the sample's (gpusim.hw.sample)
-        self.per_triangle = (prog.front_end_cycles if prog.front_end_cycles is not None
-                             else per_triangle_cycles(machine.gpu))
+        # warps wait for theirs), and only its quads are the sample's (gpusim.hw.sample); a thinned sample's,
+        # per pass, the GPU's on the thinned frame
+        front = prog.front_end_cycles if prog.front_end_cycles is not None else per_triangle_cycles(machine.gpu)
+        self.per_triangle = list(front) if isinstance(front, (list, tuple)) else [front] * len(prog.passes)
         self.quad_rate = config.quads_per_cycle
         fe = [p for p in prog.passes if p.warp_triangles is not None]
         self.requests = [sum(p.triangles for p in fe)]
@@ -231,14 +232,14 @@ class Rasterizer(Unit):
         return any(p.warp_triangles is not None for p in program.passes)
 
     def _span(self, p) -> float:
-        return max(p.triangles * self.per_triangle, p.quads / self.quad_rate)
+        return max(p.triangles * self.per_triangle[p.index], p.quads / self.quad_rate)
 
     def warp_ready(self, p, start: int) -> list | None:
         """The cycle each warp of pass ``p`` may start (its fragments' triangles out of the front end), or None
         when the pass does not come through it."""
         if p.warp_triangles is None:
             return None
-        out = np.maximum(p.warp_triangles * self.per_triangle, p.warp_quads / self.quad_rate)
+        out = np.maximum(p.warp_triangles * self.per_triangle[p.index], p.warp_quads / self.quad_rate)
         return (start + np.ceil(out).astype(np.int64)).tolist()
 
     def pass_floor(self, p, start: int) -> int:

@@ -59,6 +59,14 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   correction's sign was right in 71% of cases, and the corrected figures were
   no closer). The corpus (configs/experiments/fidelity.toml) measures how
   often the interval holds the full level's cycles.
+* Thinning (``sample.thin`` below 1, off by default). A replicate keeps only
+  that share of its SMs' share of the tiles (:func:`thinning`) and stands for
+  the whole GPU on a frame thinned to it (:func:`thinned`: the rest of the GPU's
+  load on the shared units, the atomic chains and the front end at the share
+  each pass keeps). A pass's cycles are taken to grow linearly with its work,
+  and the work check (replicates 0 and 1's samples together on the same SMs,
+  twice the share) gives each pass's slope, by which every replicate's pass
+  (and the scale check's) is extrapolated to the whole work (:func:`work_check`).
 * Hazards, requests and busy cycles: each replicate's over the share of the
   work it kept (RMW fragments for hazards, operations for the units), averaged.
 
@@ -138,6 +146,18 @@ def sampled_sms(gpu, tiles: int | None = None) -> int:
     return m
 
 
+def thinning(gpu, tiles: int, sms: int) -> float:
+    """The share of its SMs' work a replicate on ``sms`` SMs keeps, on a run whose fragments lie in ``tiles``
+    screen tiles: ``sample.thin``, raised until the replicate keeps ``sample.thin_min_tiles`` tiles; 1 (no
+    thinning) where that is over 0.5 (the work check, at twice the share, would cost what thinning saves) or
+    the replicate is the run."""
+    c = gpu.sample
+    if c.thin >= 1 or sms >= gpu.core.sms or not tiles:
+        return 1.0
+    theta = max(c.thin, c.thin_min_tiles / (tiles * sms / gpu.core.sms))
+    return theta if theta <= 0.5 else 1.0
+
+
 def replicate_sms(gpu, program: Program, floor: int) -> int:
     """SMs for a replicate whose lowered ``program`` keeps a share of the run's operations: that share of the
     GPU's SMs, at least ``floor`` (a sample that keeps more of the work than its share of the tiles, as one
@@ -207,9 +227,11 @@ class Replicates:
         self.frag_tile = self.tile_of(pixel)
         frag_tiles = np.bincount(self.frag_tile, minlength=self.tiles_x * -(-work.height // c.tile))
         occupied = int((frag_tiles > 0).sum())
+        self.theta = 1.0                         # the share of its SMs' work a replicate keeps (thinning)
         if share is None:
             self.sms = sampled_sms(gpu, occupied)
-            share = self.sms / gpu.core.sms
+            self.theta = thinning(gpu, occupied, self.sms)
+            share = self.sms / gpu.core.sms * self.theta
         self.share = share
         self.tiles = _stratified(frag_tiles, frag_tiles > 0, share, self.count, rng,
                                  int(self.tile_of(self.deepest)) if len(pixel) else -1)
@@ -387,21 +409,24 @@ def _rmw_readers(program: Program) -> np.ndarray:
 
 
 def _replicate(work: Workload, rec: dict, passes: list[tuple[int, int]], rmw_kept: tuple[int, int],
-               rmw_all: tuple[int, int]) -> dict:
+               rmw_all: tuple[int, int], theta: np.ndarray) -> dict:
     """One replicate's figures, each scaled up to the whole run: from the event model's record ``rec`` of its
-    sample, each pass's (operations kept, operations of the run) ``passes`` and the RMW threads (and pixels)
-    it kept, ``rmw_kept``, of the run's ``rmw_all``."""
+    sample, each pass's (operations kept, operations of the run) ``passes``, the RMW threads (and pixels)
+    it kept, ``rmw_kept``, of the run's ``rmw_all``, and each pass's thinning ``theta`` (:func:`thinned`;
+    its cycles are the thinned frame's, extrapolated by :func:`work_check`)."""
     kept = sum(k for k, _ in passes)
     total = sum(t for _, t in passes)
     w = kept / total if total else 1.0
-    out = {"cycles": [p["cycles"] for p in rec["passes"]], "instructions": rec["instructions"] / w,
+    thin = float(np.dot(theta, [t for _, t in passes]) / total) if total else 1.0    # over the run's operations
+    out = {"cycles": [p["cycles"] for p in rec["passes"]], "theta": list(theta), "thinning": thin,
+           "instructions": rec["instructions"] / w,
            "warps": [p["warps"] * (t / k if k else 1) for p, (k, t) in zip(rec["passes"], passes)],
            "operations_sampled": kept, "operations": total, "units_built": rec["units_built"], "units": {}}
     for name, u in rec["units"].items():
         scale = 1.0 if name == "raster" else 1 / w    # the front end takes every triangle
         out["units"][name] = {k: v * scale if k in ADDITIVE else v for k, v in u.items()}
         if "run_busy_cycles" in u:                    # a shared unit: the run's busy cycles, from its load
-            out["units"][name]["busy_cycles"] = out["units"][name].pop("run_busy_cycles")
+            out["units"][name]["busy_cycles"] = out["units"][name].pop("run_busy_cycles") / thin
     for key, every, mine in zip(("rmw_hazards", "rmw_hazard_pixels"), rmw_all, rmw_kept):
         out[key] = min(every, rec.get(key, 0) * every / mine) if mine else 0
     return out
@@ -413,12 +438,12 @@ def _floor(reps: Replicates, r: int | tuple[int, ...]) -> int:
 
 
 def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=None, outcomes=None,
-                       front=None, sms: int | None = None):
+                       front=None, sms: int | None = None, floor: int | None = None):
     """Replicate ``r``'s sample of the run (a tuple: the union of those replicates'; of its passes ``passes``,
-    from ``pieces``), lowered for the share of the GPU it takes (``sms`` where it is known): (the machine's
-    GPU, the program)."""
+    from ``pieces``), lowered for the share of the GPU it takes (``sms`` where it is known; at least ``floor``,
+    by default :func:`_floor`'s): (the machine's GPU, the program, each pass's thinning: :func:`thinned`)."""
     keep = Keep(reps, r)
-    mine = _floor(reps, r) if sms is None else sms
+    mine = (_floor(reps, r) if floor is None else floor) if sms is None else sms
     machine = scaled_gpu(gpu, mine)
     program = lower(work, machine, keep, passes=passes, pieces=pieces)
     fit = mine if sms is not None else replicate_sms(gpu, program, mine)    # the share the kept work takes
@@ -426,7 +451,54 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=
         mine, machine = fit, scaled_gpu(gpu, fit)
         program = lower(work, machine, keep, passes=passes, pieces=pieces)
     program = dataclasses.replace(program, front_end_cycles=front, l2_outcomes=outcomes)
-    return machine, program
+    if reps.theta >= 1:
+        return machine, program, np.ones(len(program.passes))
+    return machine, *thinned(program, gpu, mine)
+
+
+def thinned(program: Program, gpu, sms: int) -> tuple[Program, np.ndarray]:
+    """A thinned replicate's ``program`` on ``sms`` of the GPU's SMs, as the whole GPU on a frame thinned to
+    the share of the work each SM keeps: per pass ``theta = min(1, kept / run operations x SMs / sms)``; the
+    shared units' load from the rest of the GPU (``Program.occupancy``), the atomic words' chains
+    (``Program.hold_scale``) and the front end's cycles per triangle are ``theta`` of the run's (a request
+    never holds a unit less than its own service). (The program, ``theta`` per pass.)"""
+    n = gpu.core.sms / sms
+    theta = np.array([min(1.0, p.operations / p.operations_total * n) if p.operations_total else 1.0
+                      for p in program.passes])
+    occupancy = None if program.occupancy is None else {
+        name: np.maximum(f * theta[:, None], 1.0) for name, f in program.occupancy.items()}
+    hold = program.hold_scale
+    if hold is not None:
+        hold = np.maximum(hold * theta[program.wi_pass[program.storage("atomic")[2]]], 1.0)
+    front = program.front_end_cycles if program.front_end_cycles is not None else per_triangle_cycles(gpu)
+    return dataclasses.replace(program, occupancy=occupancy, hold_scale=hold,
+                               front_end_cycles=(front * theta).tolist()), theta
+
+
+def work_check(per_pass: np.ndarray, theta: np.ndarray, check: tuple[np.ndarray, np.ndarray] | None
+               ) -> tuple[np.ndarray, float, dict | None]:
+    """The slope per pass of the cycles with the work, from the replicates' pass cycles ``per_pass``
+    (replicates, passes) at the thinning ``theta`` of each and the work check's (cycles, thinning) per pass,
+    ``check`` (replicates 0 and 1's samples together on the same SMs): a pass's cycles taken to grow linearly
+    with its work, ``a + b x theta`` (a latency floor and a throughput term), ``b`` from the check against
+    the pair's mean, so that a sample's ``T + b x (1 - theta)`` are its cycles on the whole work. Also the
+    standard error the slope adds to a replicate total (half the difference of the slopes the check gives
+    against each member alone, over the passes) and the check's figures. No check: slopes of 0."""
+    if check is None:
+        return np.zeros(per_pass.shape[1]), 0.0, None
+    cycles, th = check
+    pair = list(SCALE_CHECK)
+
+    def slope(t, x):
+        gap = th - x
+        return np.where(gap > 1e-9, (cycles - t) / np.where(gap > 1e-9, gap, 1.0), 0.0)
+
+    b = slope(per_pass[pair].mean(axis=0), theta[pair].mean(axis=0))
+    spread = np.abs(slope(per_pass[0], theta[0]) - slope(per_pass[1], theta[1])) / 2
+    se = float((spread * (1 - theta.mean(axis=0))).sum())
+    info = {"replicates": pair, "cycles": int(round(float(cycles.sum()))),
+            "pair_cycles": float(per_pass[pair].sum(axis=1).mean()), "slope_std_error": se}
+    return b, se, info
 
 
 def _units(runs: list[dict], gpu, cycles: int) -> dict:
@@ -486,20 +558,20 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
 
 
 def _chunked_sms(work: Workload, gpu, reps: Replicates, members: list, chunks: list[tuple[int, int]]) -> list[int]:
-    """The SMs of each replicate of ``members`` (a tuple: the union of those replicates) of a run sampled a
-    chunk of passes at a time: as :func:`replicate_sms` gives for its sample of the whole run (one machine
-    size for every chunk, as when the run is lowered at once), from the operations its sample keeps of each
-    chunk's."""
+    """The SMs of each (sample, fewest SMs) of ``members`` (a sample a tuple: the union of those replicates)
+    of a run sampled a chunk of passes at a time: as :func:`replicate_sms` gives for its sample of the whole
+    run (one machine size for every chunk, as when the run is lowered at once), from the operations its
+    sample keeps of each chunk's."""
     kept, total = [0] * len(members), 0
     for first, end in chunks:
         pieces = (_candidate_pieces(work, reps, (first, end), None) if reps.share < 1    # no census: counts only
                   else plan_pieces(work, (first, end)))
         total += int(pieces.totals.sum()) if pieces.totals is not None else sum(pc.operations for pc in pieces)
-        for i, r in enumerate(members):
+        for i, (r, _) in enumerate(members):
             masks = sample_masks(pieces, Keep(reps, r), first)
             kept[i] += sum(int(np.count_nonzero(m)) for pc, m in zip(pieces, masks) if pc.instructions is None)
         del pieces
-    return [fitted_sms(gpu, k, total, _floor(reps, r)) for k, r in zip(kept, members)]
+    return [fitted_sms(gpu, k, total, floor) for k, (_, floor) in zip(kept, members)]
 
 
 def scale_check(totals: np.ndarray, machines: list[int], check_run: tuple[dict, int] | None,
@@ -539,18 +611,23 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         pieces, _ = _pieces(work, gpu, reps, None)
         if gpu.l2.size_bytes and "l2" in gpu.memory.levels and share < 1:     # the run's L2 outcomes (warming)
             outcomes = Outcomes(lower(work, gpu), gpu)
-    runs: list[dict] = []
-    machines: list[int] = []
     count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
-    # the scale check: replicates 0 and 1's samples together on their SMs together (its own figures)
-    members = list(range(count)) + ([SCALE_CHECK] if count > 1 and gpu.sample.scale_check else [])
+    # (sample, fewest SMs): the replicates; where they are thinned, the work check (replicates 0 and 1's samples
+    # together on the same SMs: twice the work); the scale check (the same samples on their SMs together)
+    members = [(r, _floor(reps, r)) for r in range(count)]
+    if count > 1 and reps.theta < 1:
+        members.append((SCALE_CHECK, reps.sms))
+    if count > 1 and gpu.sample.scale_check:
+        members.append((SCALE_CHECK, _floor(reps, SCALE_CHECK)))
     if chunks is None:
 
-        def replicate(r, gpu=gpu) -> tuple[dict, int]:
-            machine, program = _replicate_program(work, gpu, reps, r, pieces, outcomes=outcomes, front=front)
+        def replicate(member, gpu=gpu) -> tuple[dict, int]:
+            r, floor = member
+            machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, outcomes=outcomes,
+                                                         front=front, floor=floor)
             rec, _ = run_full(work, machine, program=program)
             return _replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
-                              rmw_threads(program, work), rmw_all), machine.core.sms
+                              rmw_threads(program, work), rmw_all, theta), machine.core.sms
 
         # the replicates are independent: one per process where the CPUs and their size allow (each then
         # replays its passes serially); the figures are the same
@@ -561,38 +638,51 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
             share_pieces(pieces, work.plan, gpu, len(work.plan.passes))
             reps.prepare(pieces)
             serial = gpu.replace(runner=dataclasses.replace(gpu.runner, workers=1))
-            done = fork_map(lambda r: replicate(r, serial), members, workers)
+            done = fork_map(lambda m: replicate(m, serial), members, workers)
         if done is None:
-            done = [replicate(r) for r in members]
+            done = [replicate(m) for m in members]
         runs, machines = [d[0] for d in done], [d[1] for d in done]
     else:                                    # a chunk of passes at a time, each replicate's sample of each
         fit = _chunked_sms(work, gpu, reps, members, chunks)
         streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in members]
         ops: list[list] = [[] for _ in members]
         readers: list[list] = [[] for _ in members]
+        thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
             pieces, _ = _pieces(work, gpu, reps, (first, end))
-            for i, r in enumerate(members):
-                machine, program = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
-                                                      sms=fit[i])
+            for i, (r, _) in enumerate(members):
+                machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
+                                                             sms=fit[i])
                 streams[i].replay(machine, program, first)
                 ops[i] += [(p.operations, p.operations_total) for p in program.passes]
                 readers[i].append(_rmw_readers(program))
+                thetas[i].append(theta)
                 del program
             del pieces
+        runs, machines = [], list(fit)
         for i in range(len(members)):
             rec, _ = streamed_record(work, gpu, streams[i])
-            runs.append(_replicate(work, rec, ops[i], rmw_threads(np.concatenate(readers[i]), work), rmw_all))
-            machines.append(fit[i])
-    check_run = (runs[count], machines[count]) if len(members) > count else None
+            runs.append(_replicate(work, rec, ops[i], rmw_threads(np.concatenate(readers[i]), work), rmw_all,
+                                   np.concatenate(thetas[i])))
+    checks = runs[count:]
+    work_run = checks.pop(0) if count > 1 and reps.theta < 1 else None
+    check_run = (checks[0], machines[-1]) if checks else None
     runs, machines = runs[:count], machines[:count]
     runs += runs[:1] * (reps.count - count)
     machines += machines[:1] * (reps.count - count)
     n = len(runs)
-    per_pass = np.array([run["cycles"] for run in runs], np.float64)       # (replicates, passes)
+    thin = np.array([run["theta"] for run in runs], np.float64)             # (replicates, passes)
+    # a thinned frame's pass cycles extrapolated to the whole work (as they are where nothing is thinned)
+    raw = np.array([run["cycles"] for run in runs], np.float64)
+    slope, slope_se, work_info = work_check(raw, thin, None if work_run is None else (
+        np.array(work_run["cycles"], np.float64), np.array(work_run["theta"])))
+    per_pass = raw + slope * (1 - thin)
+    if check_run is not None:                 # the scale check's cycles on the whole work, as the replicates'
+        rec_u, sms_u = check_run
+        check_run = ({"cycles": np.array(rec_u["cycles"]) + slope * (1 - np.array(rec_u["theta"]))}, sms_u)
     totals = per_pass.sum(axis=1)
     mean = float(totals.mean())
-    se = float(totals.std(ddof=1) / math.sqrt(n))
+    se = math.hypot(float(totals.std(ddof=1) / math.sqrt(n)), slope_se)
     t = t_quantile(0.975, n - 1)
     warps = np.mean([run["warps"] for run in runs], axis=0)
     passes = [{"name": p.name, "kind": p.kind, "cycles": int(round(c)), "warps": int(round(wp)),
@@ -619,7 +709,9 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
                      "replicates": n, "sms": sms, "replicate_sms": machines, "share": share, "t_quantile": t,
                      **reps.info,
                      "operations_sampled": [int(run["operations_sampled"]) for run in runs],
-                     "replicate_cycles": [int(x) for x in totals], "scale_check": check}
+                     "replicate_cycles": [int(x) for x in totals], "scale_check": check,
+                     "thin": reps.theta, "replicate_thinning": [run["thinning"] for run in runs],
+                     "work_check": work_info}
     rec["event_seconds"] = time.perf_counter() - start
     rec["cycles"] = int(cycles)
     rec["microseconds"] = cycles / gpu.core.clock_mhz
