@@ -205,6 +205,12 @@ def test_a_thinned_sampled_run_extrapolates_to_the_whole_work(spheres, scheme):
     assert 0.8 < on["cycles"] / full["cycles"] < 1.25
     # the thinned replicates' own cycles are the thinned frame's: shorter than the extrapolated figure
     assert s["work_check"]["pair_cycles"] < on["cycles"]
+    # an experiment's stats table holds the thinning and the work check; without thinning, neither
+    from gpusim.experiment.execute import timing_stat_rows
+    rows = {r["stat"]: r["value"] for r in timing_stat_rows(on) if r["unit"] == "sample"}
+    assert rows["thin"] == s["thin"] and rows["work_check_cycles"] == s["work_check"]["cycles"]
+    assert rows["slope_std_error"] == pytest.approx(s["work_check"]["slope_std_error"])
+    assert not {"thin", "work_check_cycles"} & {r["stat"] for r in timing_stat_rows(off)}
 
 
 @pytest.mark.parametrize("scheme", ["zbuffer", "freepipe-abuffer"])

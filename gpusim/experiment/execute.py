@@ -190,7 +190,7 @@ def timing_stat_rows(timing: dict) -> list[dict]:
     sample = timing.get("sample", {})
     for key, value_unit, doc in (("replicates", "samples", "replicate samples"),
                                  ("sms", "SMs", "SMs each replicate simulates"),
-                                 ("share", "1", "share of the GPU and of the work each replicate stands for"),
+                                 ("share", "1", "share of the work each replicate keeps (and of the GPU's SMs, unless thinned)"),
                                  ("tiles", "tiles", "screen tiles with fragments"),
                                  ("tiles_per_replicate", "tiles", "screen tiles each replicate samples")):
         if key in sample:                       # the sampled level's sample
@@ -201,6 +201,15 @@ def timing_stat_rows(timing: dict) -> list[dict]:
                           "SMs of the scale check (replicates 0 and 1's samples together)"))
         rows.append(_stat("sample", "scale_bias", check["bias_estimate"], "cycles",
                           "the replicates' machine-size bias the scale check gives (in the 95% interval)"))
+    work = sample.get("work_check")
+    if work:                                    # thinned replicates and their work check
+        rows.append(_stat("sample", "thin", sample["thin"], "1",
+                          "share of its SMs' work a thinned replicate keeps (sample.thin, raised to keep enough tiles)"))
+        rows.append(_stat("sample", "work_check_cycles", work["cycles"], "cycles",
+                          "cycles of the work check (replicates 0 and 1's samples together on the same SMs), "
+                          "before extrapolation"))
+        rows.append(_stat("sample", "slope_std_error", work["slope_std_error"], "cycles",
+                          "standard error the work check's slope adds to a replicate's extrapolated cycles"))
     for key in ("memory_cycles", "compute_cycles"):
         if key in timing:
             rows.append(_stat("machine", key, timing[key], "cycles", f"thesis model: {key.replace('_', ' ')}"))
