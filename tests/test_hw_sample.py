@@ -125,7 +125,7 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled", "--gpu-set", "sample.tile=4",
                  "--gpu-set", "sample.min_tiles=1", "--gpu-set", "sample.thin=0.25",
                  "--gpu-set", "sample.thin_min_tiles=1"]) == 0
-    assert "of their SMs' work and extrapolated to the whole by the work check" in capsys.readouterr().out
+    assert "of their SMs' work and extrapolated to the whole by the work checks" in capsys.readouterr().out
 
 
 def test_the_scale_check_takes_a_pass_end_to_grow_as_the_log_of_the_sms():
@@ -157,11 +157,16 @@ def test_the_work_check_extrapolates_each_pass_linearly_to_the_whole_work():
     from gpusim.hw.sample import work_check
     cycles = np.array([[100.0, 50], [110, 50], [105, 50], [95, 50]])
     theta = np.array([[0.25, 1.0]] * 4)
-    slope, se, info = work_check(cycles, theta, (np.array([180.0, 50]), np.array([0.5, 1.0])))
+    slope, se, info = work_check(cycles, theta, [(np.array([180.0, 50]), np.array([0.5, 1.0]))])
     assert slope.tolist() == [300, 0] and se == pytest.approx(15)
     assert (cycles + slope * (1 - theta))[:, 0].tolist() == [325, 335, 330, 320]
-    assert info["cycles"] == 230 and info["pair_cycles"] == 155
-    assert work_check(cycles, theta, None)[:2] == (pytest.approx([0, 0]), 0.0)
+    assert info["pairs"] == [[0, 1]] and info["cycles"] == [230] and info["pair_cycles"] == [155]
+    assert work_check(cycles, theta, [])[:2] == (pytest.approx([0, 0]), 0.0)
+    # replicates 2 and 3 together at half take 170: slope (170 - 100) / 0.25 = 280; the mean slope is 290, its
+    # standard error (300 - 280) / 2 = 10, times 0.75 on a total
+    slope, se, info = work_check(cycles, theta, [(np.array([180.0, 50]), np.array([0.5, 1.0])),
+                                                 (np.array([170.0, 50]), np.array([0.5, 1.0]))])
+    assert slope.tolist() == [290, 0] and se == pytest.approx(7.5) and info["pairs"] == [[0, 1], [2, 3]]
 
 
 def test_a_thinned_sample_stands_for_the_gpu_on_a_thinned_frame(spheres):
@@ -188,8 +193,8 @@ def test_a_thinned_sample_stands_for_the_gpu_on_a_thinned_frame(spheres):
 @pytest.mark.parametrize("scheme", ["zbuffer", "linked-list"])
 def test_a_thinned_sampled_run_extrapolates_to_the_whole_work(spheres, scheme):
     # thinning off (the default) is the sampled level as it was; on, the replicates keep a share of their SMs'
-    # work, the work check runs replicates 0 and 1 together on one SM, and each pass's cycles are extrapolated
-    # from the two to the whole work
+    # work, the work checks run replicates 0 and 1, and 2 and 3, together on one SM, and each pass's cycles are
+    # extrapolated from them to the whole work
     base = ["runner.workers=1", "sample.min_tiles=1", "sample.tile=4"]
     full = replay(spheres, scheme, {}, "full", load_gpu("gtx280", base))[1]["timing"]
     off = replay(spheres, scheme, {}, "sampled", load_gpu("gtx280", base))[1]["timing"]
@@ -199,18 +204,18 @@ def test_a_thinned_sampled_run_extrapolates_to_the_whole_work(spheres, scheme):
     assert off["sample"]["replicate_thinning"] == pytest.approx([1] * 4, abs=0.5)
     s = on["sample"]
     assert 0.25 <= s["thin"] <= 0.5 and s["share"] == pytest.approx(s["thin"] / 30)
-    assert all(0 < t < 1 for t in s["replicate_thinning"]) and s["work_check"]["replicates"] == [0, 1]
+    assert all(0 < t < 1 for t in s["replicate_thinning"]) and s["work_check"]["pairs"] == [[0, 1], [2, 3]]
     assert on["cycles"] == sum(p["cycles"] for p in on["passes"])
     assert on["cycles_ci95_low"] <= on["cycles"] <= on["cycles_ci95_high"]
     assert 0.8 < on["cycles"] / full["cycles"] < 1.25
     # the thinned replicates' own cycles are the thinned frame's: shorter than the extrapolated figure
-    assert s["work_check"]["pair_cycles"] < on["cycles"]
+    assert max(s["work_check"]["pair_cycles"]) < on["cycles"]
     # an experiment's stats table holds the thinning and the work check; without thinning, neither
     from gpusim.experiment.execute import timing_stat_rows
     rows = {r["stat"]: r["value"] for r in timing_stat_rows(on) if r["unit"] == "sample"}
-    assert rows["thin"] == s["thin"] and rows["work_check_cycles"] == s["work_check"]["cycles"]
+    assert rows["thin"] == s["thin"] and rows["work_checks"] == 2
     assert rows["slope_std_error"] == pytest.approx(s["work_check"]["slope_std_error"])
-    assert not {"thin", "work_check_cycles"} & {r["stat"] for r in timing_stat_rows(off)}
+    assert not {"thin", "work_checks"} & {r["stat"] for r in timing_stat_rows(off)}
 
 
 @pytest.mark.parametrize("scheme", ["zbuffer", "freepipe-abuffer"])

@@ -154,7 +154,7 @@ def _timing_text(t: dict, add) -> None:
         scale = (f"; machine-size bias {check['bias_estimate'] / t['cycles']:+.2%} from replicates 0 and 1 "
                  f"together on {counted(check['sms'], 'SM')}" if check and t["cycles"] else "")
         what = "the replicates' standard error and the machine-size bias" if check else "standard error"
-        thin = (f", thinned to {s['thin']:.0%} of their SMs' work and extrapolated to the whole by the work check"
+        thin = (f", thinned to {s['thin']:.0%} of their SMs' work and extrapolated to the whole by the work checks"
                 if s.get("work_check") else "")
         add(f"  95% CI     {t['cycles_ci95_low']:,} to {t['cycles_ci95_high']:,} cycles (error estimate "
             f"{t['cycle_error_estimate']:.1%}: {what} over "

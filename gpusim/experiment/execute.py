@@ -202,14 +202,13 @@ def timing_stat_rows(timing: dict) -> list[dict]:
         rows.append(_stat("sample", "scale_bias", check["bias_estimate"], "cycles",
                           "the replicates' machine-size bias the scale check gives (in the 95% interval)"))
     work = sample.get("work_check")
-    if work:                                    # thinned replicates and their work check
+    if work:                                    # thinned replicates and their work checks
         rows.append(_stat("sample", "thin", sample["thin"], "1",
                           "share of its SMs' work a thinned replicate keeps (sample.thin, raised to keep enough tiles)"))
-        rows.append(_stat("sample", "work_check_cycles", work["cycles"], "cycles",
-                          "cycles of the work check (replicates 0 and 1's samples together on the same SMs), "
-                          "before extrapolation"))
+        rows.append(_stat("sample", "work_checks", len(work["pairs"]), "samples",
+                          "work checks (a pair of replicates' samples together on the same SMs) the slopes come from"))
         rows.append(_stat("sample", "slope_std_error", work["slope_std_error"], "cycles",
-                          "standard error the work check's slope adds to a replicate's extrapolated cycles"))
+                          "standard error the work checks' slope adds to a replicate's extrapolated cycles"))
     for key in ("memory_cycles", "compute_cycles"):
         if key in timing:
             rows.append(_stat("machine", key, timing[key], "cycles", f"thesis model: {key.replace('_', ' ')}"))

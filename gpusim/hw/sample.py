@@ -64,9 +64,10 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   the whole GPU on a frame thinned to it (:func:`thinned`: the rest of the GPU's
   load on the shared units, the atomic chains and the front end at the share
   each pass keeps). A pass's cycles are taken to grow linearly with its work,
-  and the work check (replicates 0 and 1's samples together on the same SMs,
-  twice the share) gives each pass's slope, by which every replicate's pass
-  (and the scale check's) is extrapolated to the whole work (:func:`work_check`).
+  and the work checks (replicates 0 and 1's samples together on the same SMs,
+  twice the share, and 2 and 3's) give each pass's slope, by which every
+  replicate's pass (and the scale check's) is extrapolated to the whole work
+  (:func:`work_check`).
 * Hazards, requests and busy cycles: each replicate's over the share of the
   work it kept (RMW fragments for hazards, operations for the units), averaged.
 
@@ -149,7 +150,7 @@ def sampled_sms(gpu, tiles: int | None = None) -> int:
 def thinning(gpu, tiles: int, sms: int) -> float:
     """The share of its SMs' work a replicate on ``sms`` SMs keeps, on a run whose fragments lie in ``tiles``
     screen tiles: ``sample.thin``, raised until the replicate keeps ``sample.thin_min_tiles`` tiles; 1 (no
-    thinning) where that is over 0.5 (the work check, at twice the share, would cost what thinning saves) or
+    thinning) where that is over 0.5 (the work checks, at twice the share, would cost about what it saves) or
     the replicate is the run."""
     c = gpu.sample
     if c.thin >= 1 or sms >= gpu.core.sms or not tiles:
@@ -334,6 +335,9 @@ class Replicates:
 
 #: the replicates whose samples together are the scale check's (run on their SMs together)
 SCALE_CHECK = (0, 1)
+#: the pairs of replicates whose samples together are the work checks of thinned replicates (each on the same SMs),
+#: those of them a run's replicates hold
+WORK_CHECKS = ((0, 1), (2, 3))
 #: how a pass's threads become lanes (gpusim.hw.lower.thread_mapping), as candidate_rows numbers them
 _MODES = ("thread", "fragment", "triangle")
 
@@ -475,29 +479,34 @@ def thinned(program: Program, gpu, sms: int) -> tuple[Program, np.ndarray]:
                                front_end_cycles=(front * theta).tolist()), theta
 
 
-def work_check(per_pass: np.ndarray, theta: np.ndarray, check: tuple[np.ndarray, np.ndarray] | None
+def work_check(per_pass: np.ndarray, theta: np.ndarray, checks: list[tuple[np.ndarray, np.ndarray]]
                ) -> tuple[np.ndarray, float, dict | None]:
     """The slope per pass of the cycles with the work, from the replicates' pass cycles ``per_pass``
-    (replicates, passes) at the thinning ``theta`` of each and the work check's (cycles, thinning) per pass,
-    ``check`` (replicates 0 and 1's samples together on the same SMs): a pass's cycles taken to grow linearly
-    with its work, ``a + b x theta`` (a latency floor and a throughput term), ``b`` from the check against
-    the pair's mean, so that a sample's ``T + b x (1 - theta)`` are its cycles on the whole work. Also the
-    standard error the slope adds to a replicate total (half the difference of the slopes the check gives
-    against each member alone, over the passes) and the check's figures. No check: slopes of 0."""
-    if check is None:
+    (replicates, passes) at the thinning ``theta`` of each and the work checks' (cycles, thinning) per pass,
+    ``checks`` (the samples of a pair of :data:`WORK_CHECKS` together on the same SMs): a pass's cycles taken
+    to grow linearly with its work, ``a + b x theta`` (a latency floor and a throughput term), ``b`` from each
+    check against its pair's mean, and the checks' mean, so that a sample's ``T + b x (1 - theta)`` are its
+    cycles on the whole work. Also the standard error the slope adds to a replicate total: from two checks,
+    that of their mean slope (half their difference); from one, half the difference of the slopes it gives
+    against each member alone; and the checks' figures. No check: slopes of 0."""
+    if not checks:
         return np.zeros(per_pass.shape[1]), 0.0, None
-    cycles, th = check
-    pair = list(SCALE_CHECK)
 
-    def slope(t, x):
+    def slope(t, x, cycles, th):
         gap = th - x
         return np.where(gap > 1e-9, (cycles - t) / np.where(gap > 1e-9, gap, 1.0), 0.0)
 
-    b = slope(per_pass[pair].mean(axis=0), theta[pair].mean(axis=0))
-    spread = np.abs(slope(per_pass[0], theta[0]) - slope(per_pass[1], theta[1])) / 2
+    pairs = [list(p) for p in WORK_CHECKS[:len(checks)]]
+    slopes = [slope(per_pass[p].mean(axis=0), theta[p].mean(axis=0), *c) for p, c in zip(pairs, checks)]
+    b = np.mean(slopes, axis=0)
+    if len(slopes) > 1:
+        spread = np.std(slopes, axis=0, ddof=1) / math.sqrt(len(slopes))
+    else:
+        (i, j), c = pairs[0], checks[0]
+        spread = np.abs(slope(per_pass[i], theta[i], *c) - slope(per_pass[j], theta[j], *c)) / 2
     se = float((spread * (1 - theta.mean(axis=0))).sum())
-    info = {"replicates": pair, "cycles": int(round(float(cycles.sum()))),
-            "pair_cycles": float(per_pass[pair].sum(axis=1).mean()), "slope_std_error": se}
+    info = {"pairs": pairs, "cycles": [int(round(float(c[0].sum()))) for c in checks],
+            "pair_cycles": [float(per_pass[p].sum(axis=1).mean()) for p in pairs], "slope_std_error": se}
     return b, se, info
 
 
@@ -612,11 +621,11 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         if gpu.l2.size_bytes and "l2" in gpu.memory.levels and share < 1:     # the run's L2 outcomes (warming)
             outcomes = Outcomes(lower(work, gpu), gpu)
     count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
-    # (sample, fewest SMs): the replicates; where they are thinned, the work check (replicates 0 and 1's samples
-    # together on the same SMs: twice the work); the scale check (the same samples on their SMs together)
+    # (sample, fewest SMs): the replicates; where they are thinned, the work checks (pairs of replicates' samples
+    # together on the same SMs: twice the work); the scale check (replicates 0 and 1 on their SMs together)
     members = [(r, _floor(reps, r)) for r in range(count)]
-    if count > 1 and reps.theta < 1:
-        members.append((SCALE_CHECK, reps.sms))
+    work_checks = [p for p in WORK_CHECKS if max(p) < count] if reps.theta < 1 else []
+    members += [(p, reps.sms) for p in work_checks]
     if count > 1 and gpu.sample.scale_check:
         members.append((SCALE_CHECK, _floor(reps, SCALE_CHECK)))
     if chunks is None:
@@ -664,9 +673,8 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
             rec, _ = streamed_record(work, gpu, streams[i])
             runs.append(_replicate(work, rec, ops[i], rmw_threads(np.concatenate(readers[i]), work), rmw_all,
                                    np.concatenate(thetas[i])))
-    checks = runs[count:]
-    work_run = checks.pop(0) if count > 1 and reps.theta < 1 else None
-    check_run = (checks[0], machines[-1]) if checks else None
+    work_runs = runs[count:count + len(work_checks)]
+    check_run = (runs[-1], machines[-1]) if len(runs) > count + len(work_checks) else None
     runs, machines = runs[:count], machines[:count]
     runs += runs[:1] * (reps.count - count)
     machines += machines[:1] * (reps.count - count)
@@ -674,8 +682,8 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     thin = np.array([run["theta"] for run in runs], np.float64)             # (replicates, passes)
     # a thinned frame's pass cycles extrapolated to the whole work (as they are where nothing is thinned)
     raw = np.array([run["cycles"] for run in runs], np.float64)
-    slope, slope_se, work_info = work_check(raw, thin, None if work_run is None else (
-        np.array(work_run["cycles"], np.float64), np.array(work_run["theta"])))
+    slope, slope_se, work_info = work_check(raw, thin, [(np.array(w["cycles"], np.float64), np.array(w["theta"]))
+                                                        for w in work_runs])
     per_pass = raw + slope * (1 - thin)
     if check_run is not None:                 # the scale check's cycles on the whole work, as the replicates'
         rec_u, sms_u = check_run
