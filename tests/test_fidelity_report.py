@@ -117,6 +117,15 @@ def test_misses_say_what_decided_them(errors):
     assert sampled["decided by"].endswith("; busy against full: l2 +50%; L2 hits 95.0% (full 90.0%)")
 
 
+def test_a_thinned_sample_says_so():
+    from gpusim.report.tables import sample_sizes
+    rows = [("r", "sample", k, "", v) for k, v in (("replicates", 4), ("sms", 1), ("share", 0.25 / 30), ("tiles", 2304),
+                                                    ("tiles_per_replicate", 19), ("thin", 0.25), ("work_checks", 2))]
+    rows.append(("r", "machine", "cycles", "", 1000.0))
+    stats = pd.DataFrame(rows, columns=["run", "unit", "stat", "labels", "value"])
+    assert sample_sizes(stats)["r"] == "4 x 1 SM (thinned to 25% of their work, 2 work checks), 19 of 2,304 tiles each"
+
+
 def test_busy_errors_sum_the_full_levels_instances(errors):
     busy = busy_errors(errors, _stats())
     dram = busy[busy["unit"] == "dram"]

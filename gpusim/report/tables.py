@@ -218,16 +218,19 @@ def decided_by(stats: pd.DataFrame) -> dict[str, str]:
 
 
 def sample_sizes(stats: pd.DataFrame) -> dict[str, str]:
-    """Per sampled run: its sample (replicates of how many SMs, tiles per replicate of how many) and its scale
-    check's SMs and bias (over the run's cycles)."""
+    """Per sampled run: its sample (replicates of how many SMs, tiles per replicate of how many; thinned
+    replicates' share of their SMs' work and their work checks) and its scale check's SMs and bias (over the
+    run's cycles)."""
     sel = stats[stats["unit"] == "sample"]
     cycles = stats[(stats["unit"] == "machine") & (stats["stat"] == "cycles")]
     cycles = cycles.drop_duplicates("run").set_index("run")["value"]
     out = {}
     for run, part in sel.groupby("run", sort=False):
         v = dict(zip(part["stat"], part["value"]))
-        out[run] = (f"{v.get('replicates', 0):.0f} x {v.get('sms', 0):.0f} SM ({v.get('share', 0):.1%} of the "
-                    f"GPU), {v.get('tiles_per_replicate', 0):,.0f} of {v.get('tiles', 0):,.0f} tiles each")
+        share = (f"thinned to {v['thin']:.0%} of their work, {v.get('work_checks', 0):.0f} work checks" if "thin" in v
+                 else f"{v.get('share', 0):.1%} of the GPU")
+        out[run] = (f"{v.get('replicates', 0):.0f} x {v.get('sms', 0):.0f} SM ({share}), "
+                    f"{v.get('tiles_per_replicate', 0):,.0f} of {v.get('tiles', 0):,.0f} tiles each")
         if "scale_bias" in v and cycles.get(run):
             out[run] += (f"; scale check on {v.get('scale_check_sms', 0):.0f} SM: machine-size bias "
                          f"{v['scale_bias'] / cycles[run]:+.2%}")
