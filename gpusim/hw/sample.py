@@ -444,10 +444,10 @@ def _floor(reps: Replicates, r: int | tuple[int, ...]) -> int:
 def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=None, outcomes=None,
                        front=None, sms: int | None = None, floor: int | None = None):
     """Replicate ``r``'s sample of the run (a tuple: the union of those replicates'; of its passes ``passes``,
-    from ``pieces``), lowered for the share of the GPU it takes (``sms`` where it is known; at least ``floor``,
-    by default :func:`_floor`'s): (the machine's GPU, the program, each pass's thinning: :func:`thinned`)."""
+    from ``pieces``), lowered for the share of the GPU it takes (``sms`` where it is known, else at least
+    ``floor``): (the machine's GPU, the program, each pass's thinning: :func:`thinned`)."""
     keep = Keep(reps, r)
-    mine = (_floor(reps, r) if floor is None else floor) if sms is None else sms
+    mine = floor if sms is None else sms
     machine = scaled_gpu(gpu, mine)
     program = lower(work, machine, keep, passes=passes, pieces=pieces)
     fit = mine if sms is not None else replicate_sms(gpu, program, mine)    # the share the kept work takes
