@@ -68,6 +68,7 @@ import numpy as np
 import pandas as pd
 
 from gpusim.errors import GpusimError
+from gpusim.shaders import SHADINGS
 
 OPS = ("load", "store", "atomic_min", "atomic_max", "atomic_inc", "atomic_exch",
        "rmw_read", "rmw_write", "blend", "depth_test", "stencil", "program_blend", "scoreboard")
@@ -85,6 +86,9 @@ class Pass:
     ``software``: the pass is a compute kernel (a software rasterizer), not the
     graphics pipeline. ``primitives``: primitives a geometry pass submits
     (None: the whole scene; a batch of the k-buffer's heuristic submits its own).
+    ``shading``: what a geometry pass of fragment threads needs of the scene's
+    fragment shader (gpusim.shaders): the fragment's ``colour``, its ``alpha``
+    alone, or ``none`` (a depth-only pass); other passes run no fragment shader.
     """
 
     name: str
@@ -92,10 +96,16 @@ class Pass:
     threads: str
     software: bool = False
     primitives: int | None = None
+    shading: str = "colour"
 
     def __post_init__(self):
-        if self.kind not in PASS_KINDS or self.threads not in THREAD_KINDS:
+        if self.kind not in PASS_KINDS or self.threads not in THREAD_KINDS or self.shading not in SHADINGS:
             raise ValueError(f"bad pass {self}")
+
+    @property
+    def shades(self) -> bool:
+        """Whether the pass runs the scene's fragment shader on its threads (a geometry pass of fragments)."""
+        return self.kind == "geometry" and self.threads == "fragment" and self.shading != "none"
 
 
 @dataclass

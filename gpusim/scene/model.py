@@ -11,6 +11,7 @@ from typing import ClassVar, Literal
 
 from gpusim.config import param
 from gpusim.scene.camera import look_at
+from gpusim.shaders import ShaderName
 
 Vec3 = tuple[float, float, float]
 
@@ -256,6 +257,9 @@ class Scene:
     screen: Screen = param(Screen())
     camera: Camera = param(Camera())
     lighting: Lighting = param(Lighting())
+    fragment_shader: ShaderName = param("none", doc="the material program each shaded fragment runs, timed in "
+                                        "every scheme's shading passes (gpusim.shaders: 'none', the trace's "
+                                        "colours are final; 'lucid-simple', LucidRaster's hardware renderer)")
     raster: RasterOptions = param(RasterOptions())
     objects: tuple[ObjectSpec, ...] = param((), doc="objects in submission order")
     subdivide_budget: float = param(1.0, unit="x the scene's triangles",

@@ -17,8 +17,10 @@ import numpy as np
 from gpusim.config import build, describe, to_dict
 from gpusim.errors import ConfigError
 from gpusim.metrics.composite import composite_runs
+from gpusim.schemes.common.shading import shade_fragments
 from gpusim.schemes.common.storage import effective_alpha, store_colour
 from gpusim.schemes.result import SchemeResult
+from gpusim.shaders import trace_fragment_shader
 from gpusim.trace import FragmentTrace
 
 #: name -> scheme class; filled by @register at import of gpusim.schemes.
@@ -47,8 +49,10 @@ class Scheme:
         return to_dict(self)
 
     def run(self, trace: FragmentTrace) -> SchemeResult:
-        """Replay ``trace`` through this scheme (functional model)."""
+        """Replay ``trace`` through this scheme (functional model); its plan's shading passes run the scene's
+        fragment shader first (gpusim.schemes.common.shading)."""
         result = self.simulate(trace)
+        shade_fragments(result.plan, trace_fragment_shader(trace.meta))
         result.image = result.image.astype(np.float64, copy=False)
         return result
 

@@ -144,7 +144,7 @@ class _Ranges:
         return int(self.box is None)
 
     def bounds_pass(self) -> Pass:
-        return Pass("bounds", "geometry", "fragment") if self.box is None else Pass("bounds", "fullscreen", "pixel")
+        return Pass("bounds", "geometry", "fragment", shading="none") if self.box is None else Pass("bounds", "fullscreen", "pixel")
 
     def add(self, plan: OpPlan, n: int, pix: np.ndarray, P: int, planes: dict[str, int]) -> None:
         """Pass 0 clears the range and each structure's ``planes`` screen-sized target planes; pass 1 (bounds)
@@ -272,7 +272,7 @@ class AdaptiveBucketDepthPeeling(_Bucketed):
         bucket = np.where(occupied[pix] <= BUCKETS, rank, rank * BUCKETS // np.maximum(occupied[pix], 1))
 
         passes = [Pass("clear", "clear", "entry"), ranges.bounds_pass(),
-                  Pass("histogram", "geometry", "fragment"), Pass("capture", "geometry", "fragment"),
+                  Pass("histogram", "geometry", "fragment", shading="none"), Pass("capture", "geometry", "fragment"),
                   Pass("composite", "fullscreen", "pixel")]
         plan = OpPlan(passes, ["depth_range", "histogram", "buckets"])
         ranges.add(plan, n, pix, P, {"histogram": targets, "buckets": _targets(BUCKETS)})

@@ -139,7 +139,7 @@ class DualDepthPeeling(Scheme):
         m = np.minimum(d, e)                      # peeled in pass m + 1
         need = -(-int(lay.max(initial=0)) // 2)
         peels = min(need, self.max_passes) if self.max_passes else need
-        passes = [Pass("init", "geometry", "fragment")] + [Pass(f"peel {k}", "geometry", "fragment")
+        passes = [Pass("init", "geometry", "fragment", shading="none")] + [Pass(f"peel {k}", "geometry", "fragment")
                                                           for k in range(1, peels + 1)]
         passes.append(Pass("final", "fullscreen", "pixel"))
         cb, mm = COLOUR_BYTES[self.colour_format], 2 * DEPTH_BYTES

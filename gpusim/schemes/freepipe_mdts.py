@@ -97,7 +97,9 @@ class FreePipeMDTS(Scheme):
         cb = 4 if self.packing else COLOUR_BYTES[self.colour_format]
         depth_only = not self.packing and self.colour == "none"
 
-        passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment", software=True)]
+        # the capture pass needs the colour only where it packs it with the depth; a colour pass shades otherwise
+        passes = [Pass("clear", "clear", "entry"),
+                  Pass("capture", "geometry", "fragment", software=True, shading="colour" if self.packing else "none")]
         if not self.packing and not depth_only:
             passes.append(Pass("colour", "geometry", "fragment", software=True))
         passes.append(Pass("resolve", "fullscreen", "pixel"))

@@ -156,7 +156,7 @@ class MomentBasedOIT(Scheme):
         tb = np.asarray(channels, np.int64) * vb                   # bytes of one texel of each target
         prepass = self.opaque == "prepass" and bool(trace.opaque.any())   # no opaque: nothing to pre-pass
         passes = ([Pass("opaque", "geometry", "fragment")] if prepass else []) + [
-            Pass("moments", "geometry", "fragment"), Pass("transmittance", "geometry", "fragment"),
+            Pass("moments", "geometry", "fragment", shading="alpha"), Pass("transmittance", "geometry", "fragment"),
             Pass("resolve", "fullscreen", "pixel")]
         plan = OpPlan(passes, (["depth_buffer", "framebuffer"] if prepass else []) +
                       ["zeroth_moment", "moments", "accumulation"])
