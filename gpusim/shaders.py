@@ -93,4 +93,9 @@ def trace_fragment_shader(meta: Mapping) -> FragmentShader:
     """The fragment shader a trace's scene declares (``meta['scene_config']['fragment_shader']``); ``none`` for
     a trace that records none (an imported CSV, a histogram scene, a trace made before the key existed)."""
     config = meta.get("scene_config") or {}
-    return fragment_shader(config.get("fragment_shader", "none") if isinstance(config, Mapping) else "none")
+    name = config.get("fragment_shader", "none") if isinstance(config, Mapping) else "none"
+    try:
+        return fragment_shader(name)
+    except ValueError as e:
+        raise ValueError(f"the trace's scene_config.fragment_shader: {e}; make the trace again from its scene "
+                         f"with a known shader") from None

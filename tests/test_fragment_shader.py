@@ -63,6 +63,8 @@ def test_a_trace_without_a_declared_shader_runs_none():
     assert trace_fragment_shader({}).name == "none"
     assert trace_fragment_shader({"scene_config": {"name": "x"}}).name == "none"
     assert trace_fragment_shader({"scene_config": {"fragment_shader": "lucid-simple"}}) is LIT
+    with pytest.raises(ValueError, match="scene_config.fragment_shader: unknown fragment shader 'phong'"):
+        trace_fragment_shader({"scene_config": {"fragment_shader": "phong"}})
 
 
 def test_alpha_blending_shades_every_fragment_of_each_pass_first():

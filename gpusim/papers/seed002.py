@@ -202,7 +202,9 @@ def _frame_rows(rows: list[PaperRow], results: pd.DataFrame) -> None:
                                                                          fidelity=_level(results), **p)
                                 * _per_frame(results, s), source, f"{what} time (us)", paper,
                                 "simulated on laptop-ampere at 1,485 MHz against the paper's GTX 3050 Ti"
-                                + (f"; {per}" if per else "")))
+                                + ("; each fragment runs the scene's fragment shader (the look-alikes: "
+                                   "lucid-simple, the paper's simple_material.glsl)" if variant == "alpha-blend"
+                                   else "") + (f"; {per}" if per else "")))
 
 
 def _invalid_note(results: pd.DataFrame, scene: str | None) -> str:
