@@ -27,6 +27,7 @@ from gpusim.experiment.grid import GPU_LEVELS, RunSpec, expand, resolved_run, ru
 from gpusim.experiment.spec import Experiment
 from gpusim.experiment.store import FIGURE_COLUMNS, LEAD_COLUMNS, LEVEL_COLUMNS, ResultsStore
 from gpusim.hw.gpu import with_section
+from gpusim.shaders import trace_fragment_shader
 
 
 @dataclass
@@ -45,9 +46,13 @@ class Summary:
 
 
 def trace_sha256(trace) -> str:
-    """The hash of a trace's content: its arrays, screen and background (not its metadata or file name)."""
+    """The hash of a trace's content: its arrays, screen and background, and its scene's fragment shader where
+    it declares one, which every scheme's timing runs (not its other metadata or its file name)."""
     h = hashlib.sha256()
     h.update(f"{trace.width}x{trace.height};{list(trace.background)}".encode())
+    shader = trace_fragment_shader(trace.meta).name
+    if shader != "none":
+        h.update(f";fragment_shader={shader}".encode())
     for name in ("x", "y", "z", "rgba", "prim", "opaque"):
         array = np.ascontiguousarray(getattr(trace, name))
         if array.size:

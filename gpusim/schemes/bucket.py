@@ -227,7 +227,7 @@ class BucketDepthPeeling(_Bucketed):
         ranges = _Ranges(self.bounds, trace, g)
         bucket = bucket_of(trace.z, ranges.near, ranges.far, buckets)
         passes = [Pass("clear", "clear", "entry"), ranges.bounds_pass()]
-        passes += [Pass(f"capture {i}", "geometry", "fragment") for i in range(c)]
+        passes += [Pass(f"capture {i}", "geometry", "fragment", shading="none") for i in range(c)]   # depths only
         passes.append(Pass("composite", "fullscreen", "pixel"))
         plan = OpPlan(passes, ["depth_range", "buckets"])
         ranges.add(plan, n, pix, P, {"buckets": _targets(buckets)})
@@ -272,7 +272,8 @@ class AdaptiveBucketDepthPeeling(_Bucketed):
         bucket = np.where(occupied[pix] <= BUCKETS, rank, rank * BUCKETS // np.maximum(occupied[pix], 1))
 
         passes = [Pass("clear", "clear", "entry"), ranges.bounds_pass(),
-                  Pass("histogram", "geometry", "fragment", shading="none"), Pass("capture", "geometry", "fragment"),
+                  Pass("histogram", "geometry", "fragment", shading="none"),
+                  Pass("capture", "geometry", "fragment", shading="none"),
                   Pass("composite", "fullscreen", "pixel")]
         plan = OpPlan(passes, ["depth_range", "histogram", "buckets"])
         ranges.add(plan, n, pix, P, {"histogram": targets, "buckets": _targets(BUCKETS)})

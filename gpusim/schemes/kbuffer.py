@@ -124,17 +124,19 @@ class KBuffer(Scheme):
         blend = self.mode == "sort-blend"
 
         passes = [Pass("clear", "clear", "entry")]
+        shading = "none" if fmt == "z" else "colour"       # Z-only entries: the fragment's colour is not needed
         if self.batch:
             batches, prims = batch_plan(t, self.batch, self.order == "centroid")
             n_batches = len(prims)
             for b in range(n_batches):
                 if b:
                     passes.append(Pass(f"flush {b}", "flush", "none"))
-                passes.append(Pass(f"capture batch {b}", "geometry", "fragment", primitives=int(prims[b])))
+                passes.append(Pass(f"capture batch {b}", "geometry", "fragment", primitives=int(prims[b]),
+                                   shading=shading))
             frag_pass = 1 + 2 * batches
         else:
             n_batches = 1
-            passes.append(Pass("capture", "geometry", "fragment"))
+            passes.append(Pass("capture", "geometry", "fragment", shading=shading))
             frag_pass = 1
         passes.append(Pass("resolve", "fullscreen", "pixel"))
         resolve = len(passes) - 1

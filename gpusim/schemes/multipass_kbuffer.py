@@ -114,7 +114,7 @@ class MultipassKBuffer(Scheme):
         passes, peel_at, resolve_at = [Pass("clear", "clear", "entry")], [], []
         for p in range(max(total, 1)):
             peel_at.append(len(passes))
-            passes.append(Pass(f"peel {p}", "geometry", "fragment"))
+            passes.append(Pass(f"peel {p}", "geometry", "fragment", shading="none" if fmt == "z" else "colour"))
             if p < m:
                 resolve_at.append(len(passes))
                 passes.append(Pass(f"resolve {p}", "fullscreen", "pixel"))

@@ -57,7 +57,7 @@ class StencilRoutedABuffer(Scheme):
         sb = DEPTH_BYTES + COLOUR_BYTES[self.colour_format]
         passes = [Pass("clear", "clear", "entry"), Pass("capture", "geometry", "fragment")]
         if self.overflow_pass:
-            passes.append(Pass("overflow", "geometry", "fragment"))
+            passes.append(Pass("overflow", "geometry", "fragment", shading="none"))   # stencil and query only
         passes.append(Pass("resolve", "fullscreen", "pixel"))
         plan = OpPlan(passes, ["stencil", "samples"])
         plan.add(0, "store", "stencil", P * k, 1, lambda i, s: i * STENCIL_BYTES, STENCIL_BYTES)

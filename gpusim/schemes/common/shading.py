@@ -2,14 +2,17 @@
 
 Every geometry pass of fragment threads runs the scene's material program
 (gpusim.shaders) on each fragment it shades before the scheme's own work: the
-pixel shader of the hardware pipeline (helper lanes of partial quads run it
+pixel shader of the graphics pipeline (helper lanes of partial quads run it
 too: they fill the same warps), or FreePipe's software rasterizer, which
 shades each fragment in its triangle loop. What a pass needs is its
 ``Pass.shading``: the whole program, the alpha alone, or nothing for a
 depth-only pass. A pass's shaded fragments are the threads that issue its
-operations. The work is a ``compute`` group put first in program order, so
-each fragment shades before it reads or writes anything; the plan's access
-counts are unchanged.
+operations (its depth-tested fragments included: the shader runs before the
+ROP's depth test, as a late-z pipeline does). The work is a ``compute`` group
+put first in program order, so each fragment shades before it reads or writes
+anything, or, in a pass behind the k-buffer's dispatch scoreboard (proposal 1,
+which holds a fragment's whole program), right after its ``scoreboard``
+operation. The plan's access counts are unchanged.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from gpusim.shaders import FragmentShader
 
 def _pass_threads(g: OpGroup, wanted: list[bool]):
     """(pass, threads) for each wanted pass ``g`` reaches: a ThreadRange where every thread of a range takes
-    part, else the thread ids (unsorted, possibly repeated)."""
+    part, else the ids of the threads with work there (unsorted, possibly repeated)."""
     count = g.count
     if g.seq_pass is not None:
         for at, p in enumerate(g.seq_pass[:int(count.max())].tolist()):
@@ -42,45 +45,70 @@ def _pass_threads(g: OpGroup, wanted: list[bool]):
             if wanted[p]:
                 yield p, ids[i[pp == p]]
         return
+    working = count > 0
     if np.isscalar(g.pass_index):
-        if wanted[int(g.pass_index)]:
-            yield int(g.pass_index), g.thread
-        return
-    pi = np.asarray(g.pass_index)
-    ids = g.thread_ids()
-    for p in np.unique(pi).tolist():
+        p = int(g.pass_index)
         if wanted[p]:
-            yield p, ids[pi == p]
+            yield p, g.thread if isinstance(g.thread, ThreadRange) and bool(working.all()) else g.thread_ids()[working]
+        return
+    pi = np.asarray(g.pass_index)[working]
+    ids = g.thread_ids()[working]
+    order = np.argsort(pi, kind="stable")
+    pi, ids = pi[order], ids[order]
+    cuts = np.flatnonzero(np.diff(pi)) + 1
+    for p, threads in zip(pi[np.r_[0, cuts]].tolist() if len(pi) else [], np.split(ids, cuts)):
+        if wanted[p]:
+            yield p, threads
+
+
+def _scoreboard_at(plan: OpPlan, wanted: list[bool]) -> dict[int, int]:
+    """Per pass, the position after its last ``scoreboard`` group (where the shader goes), for passes that have
+    one."""
+    at: dict[int, int] = {}
+    for index, g in enumerate(plan.groups):
+        if g.op == "scoreboard":
+            for p, _ in _pass_threads(g, wanted):
+                at[p] = index + 1
+    return at
 
 
 def shade_fragments(plan: OpPlan, shader: FragmentShader) -> None:
-    """Put ``shader``'s work first in each shading pass of ``plan`` (in place): one compute group per pass,
-    or one across the passes whose threads are all of a range (depth peeling's peels), so the plan still grows
-    with the threads plus the passes."""
+    """Put ``shader``'s work first in each shading pass of ``plan`` (in place; after the dispatch scoreboard
+    where a pass has one): one compute group per pass, or one across the passes whose threads are all of a range
+    (depth peeling's peels), so the plan still grows with the threads plus the passes."""
     wanted = [p.shades and shader.instructions(p.shading) > 0 for p in plan.passes]
     if not any(wanted):
         return
     ranges: dict[int, int] = {}
     parts: dict[int, list[np.ndarray]] = defaultdict(list)
     for g in plan.groups:
+        if g.is_compute and g.instructions is not None and not int(np.max(g.instructions, initial=0)):
+            continue
         for p, threads in _pass_threads(g, wanted):
             if isinstance(threads, ThreadRange):
                 ranges[p] = max(ranges.get(p, 0), len(threads))
             else:
                 parts[p].append(np.asarray(threads, np.int64))
-    before = len(plan.groups)
-    whole: dict[tuple[int, int], list[int]] = defaultdict(list)     # (range, instructions) -> its passes
+    position = _scoreboard_at(plan, wanted)
+    inserts: list[tuple[int, OpGroup]] = []
+    whole: dict[tuple[int, int, int], list[int]] = defaultdict(list)    # (range, instructions, position): passes
+
+    def add(at: int, *args, **kwargs) -> None:
+        before = len(plan.groups)
+        plan.compute(*args, dep=False, **kwargs)
+        inserts.extend((at, g) for g in plan.groups[before:])
+        del plan.groups[before:]
+
     for p in sorted(set(ranges) | set(parts)):
         inst = shader.instructions(plan.passes[p].shading)
         n = ranges.get(p, 0)
         rest = [t[t >= n] for t in parts.get(p, [])]
         if n and not any(len(t) for t in rest):
-            whole[(n, inst)].append(p)
+            whole[(n, inst, position.get(p, 0))].append(p)
             continue
-        threads = np.unique(np.concatenate([np.arange(n, dtype=np.int64)] + rest))
-        plan.compute(p, threads, inst, dep=False)
-    for (n, inst), passes in whole.items():
-        plan.compute(passes[0], n, inst, dep=False, count=len(passes), seq_pass=np.asarray(passes, np.int64))
-    added = plan.groups[before:]
-    del plan.groups[before:]
-    plan.groups[:0] = added
+        add(position.get(p, 0), p, np.unique(np.concatenate([np.arange(n, dtype=np.int64)] + rest)), inst)
+    for (n, inst, at), passes in whole.items():
+        add(at, passes[0], n, inst, count=len(passes), seq_pass=np.asarray(passes, np.int64))
+    # from the back, so earlier positions hold; at one position the last made first, so they keep their order
+    for _, (at, g) in sorted(enumerate(inserts), key=lambda item: (-item[1][0], -item[0])):
+        plan.groups.insert(at, g)
