@@ -170,3 +170,11 @@ def test_a_run_timed_with_another_shader_is_another_run():
     none = tiny()
     none.meta["scene_config"] = {"fragment_shader": "none"}
     assert trace_sha256(none) == trace_sha256(plain)          # traces that declare none keep their hash
+
+
+def test_mlab_shades_before_its_interlock():
+    got, res = shading_groups("mlab", tiny(), hw="rov", layers=2)
+    assert got == [(1, {f: 106 for f in range(6)})]
+    ops = [g.op for g in res.plan.groups]
+    shader = next(i for i, g in enumerate(res.plan.groups) if g.is_compute and int(np.max(g.instructions)) == 106)
+    assert shader < ops.index("scoreboard")

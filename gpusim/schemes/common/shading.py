@@ -10,9 +10,9 @@ depth-only pass. A pass's shaded fragments are the threads that issue its
 operations (its depth-tested fragments included: the shader runs before the
 ROP's depth test, as a late-z pipeline does). The work is a ``compute`` group
 put first in program order, so each fragment shades before it reads or writes
-anything, or, in a pass behind the k-buffer's dispatch scoreboard (proposal 1,
-which holds a fragment's whole program), right after its ``scoreboard``
-operation. The plan's access counts are unchanged.
+anything, or, in a pass whose program opens with the k-buffer's dispatch
+scoreboard (proposal 1, which holds a fragment's whole program), right after
+its ``scoreboard`` operation. The plan's access counts are unchanged.
 """
 
 from __future__ import annotations
@@ -61,15 +61,16 @@ def _pass_threads(g: OpGroup, wanted: list[bool]):
             yield p, threads
 
 
-def _scoreboard_at(plan: OpPlan, wanted: list[bool]) -> dict[int, int]:
-    """Per pass, the position after its last ``scoreboard`` group (where the shader goes), for passes that have
-    one."""
-    at: dict[int, int] = {}
+def _dispatch_at(plan: OpPlan, wanted: list[bool]) -> dict[int, int]:
+    """Per pass whose program opens with a ``scoreboard`` operation (a dispatch scoreboard, the k-buffer's
+    proposal 1: the fragment is held from dispatch), the position after that group, where the shader goes. A
+    scoreboard later in the program (MLAB's rasterizer-ordered view: an interlock around the read-modify-write
+    only) leaves the shader first."""
+    first: dict[int, int] = {}
     for index, g in enumerate(plan.groups):
-        if g.op == "scoreboard":
-            for p, _ in _pass_threads(g, wanted):
-                at[p] = index + 1
-    return at
+        for p, _ in _pass_threads(g, wanted):
+            first.setdefault(p, index)
+    return {p: i + 1 for p, i in first.items() if plan.groups[i].op == "scoreboard"}
 
 
 def shade_fragments(plan: OpPlan, shader: FragmentShader) -> None:
@@ -89,7 +90,7 @@ def shade_fragments(plan: OpPlan, shader: FragmentShader) -> None:
                 ranges[p] = max(ranges.get(p, 0), len(threads))
             else:
                 parts[p].append(np.asarray(threads, np.int64))
-    position = _scoreboard_at(plan, wanted)
+    position = _dispatch_at(plan, wanted)
     inserts: list[tuple[int, OpGroup]] = []
     whole: dict[tuple[int, int, int], list[int]] = defaultdict(list)    # (range, instructions, position): passes
 
