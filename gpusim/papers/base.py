@@ -182,3 +182,13 @@ def fps(results: pd.DataFrame, **filters: Any) -> float:
     """Frames per second at the GPU's clock of the one full-level run matching ``filters``: 10^6 over its
     microseconds."""
     return 1e6 / one(results, "microseconds", fidelity="full", **filters)
+
+
+def vertex_source_note(results: pd.DataFrame, experiment: str) -> str:
+    """How the runs' draws got their vertices (``raster.vertex_source``, a gpu-set of ``experiment``), as a
+    note's tail."""
+    sources = set(results["raster.vertex_source"].dropna()) if "raster.vertex_source" in results else set()
+    if sources == {"host"}:
+        return ("; every draw sends the mesh's indices and vertices from host memory over PCI Express (an "
+                f"assumption: the paper does not say; configs/experiments/{experiment}.toml gives the reasons)")
+    return "; vertices in device memory"

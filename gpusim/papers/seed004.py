@@ -24,7 +24,7 @@ from __future__ import annotations
 import pandas as pd
 
 from gpusim.papers.base import (WITHIN_1_5X, Comparison, Missing, PaperRow, Section, fps, guarded,
-                                mark, one, select, summary_row)
+                                mark, one, select, summary_row, vertex_source_note)
 
 DATASETS = (("Dragon", "871k", "like-dragon", 1), ("Powerplant", "12.7M", "like-powerplant", 8),
             ("Lucy", "28.0M", "like-lucy-28m", 14))
@@ -49,19 +49,10 @@ def _fps(results: pd.DataFrame, scene: str, mode: str, k: int) -> float:
     return fps(results, scene=scene, **_variant(mode, k))
 
 
-def _vertex_note(results: pd.DataFrame) -> str:
-    """How the runs' draws got their vertices (``raster.vertex_source``, a gpu-set of the experiment)."""
-    sources = set(results["raster.vertex_source"].dropna()) if "raster.vertex_source" in results else set()
-    if sources == {"host"}:
-        return ("; every draw sends the mesh's indices and vertices from host memory over PCI Express (an "
-                "assumption: the paper does not say; configs/experiments/seed-004.toml gives the reasons)")
-    return "; vertices in device memory"
-
-
 def compare(results: pd.DataFrame, stats: pd.DataFrame) -> Comparison:
     rows: list[PaperRow] = []
     ratios: list[PaperRow] = []
-    vertices = _vertex_note(results)
+    vertices = vertex_source_note(results, "seed-004")
     for name, tris, scene, scale in DATASETS:
         scaled = f"; the look-alike has {scale}x fewer triangles" if scale > 1 else ""
         for k in (4, 16):
