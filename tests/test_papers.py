@@ -204,6 +204,20 @@ def test_seed000_a_per_model_difference_survives_the_per_method_fit():
     assert total == 225 and 180 <= held < 225 and fit.note.startswith("[derived] a diagnostic")
 
 
+def test_seed000_the_stanford_bunny_stands_for_its_look_alike_where_it_ran():
+    results = seed000_results()
+    assert paper000.scenes_in(results, paper000.SCENE)["Bunny"] == "like-bunny"
+    real = results.copy()
+    real.loc[real["scene"] == "like-bunny", "scene"] = "stanford-bunny"
+    assert paper000.scenes_in(real, paper000.SCENE)["Bunny"] == "stanford-bunny"
+    assert paper000.scenes_in(real, paper000.CUDP_SCENE)["Dragon"] == "like-dragon"
+    rows = by_key(paper000.compare(real, NO_STATS))
+    row = rows[("000 Table 3, Bunny", "ABS frame rate (fps)")]
+    assert row.ours == pytest.approx(614) and row.note.startswith("the Stanford bunny itself")
+    assert rows[("000 Table 3", "pairs of modelled methods within 1.5x of the paper's ratio")].verdict == "met"
+    assert rows[("001 Table 1, Bunny", "CUDP2 frame rate (fps)")].note.startswith("the Stanford bunny itself")
+
+
 def test_seed000_bucket_methods_geometry_passes_are_the_texts():
     """Table 3 prints no pass count for BDP, BDP2 and ADP; its caption and section 5.1 give 1, 2 and 2."""
     results = seed000_results()
