@@ -45,7 +45,7 @@ from gpusim.hw.unit import div, entry_unit, interleave, mod
 from gpusim.jit import compiled_once
 from gpusim.metrics.composite import run_starts
 from gpusim.opplan import OPS, OpPlan
-from gpusim.schemes.common.arrays import lex_sorted, rank_in_runs
+from gpusim.schemes.common.arrays import lex_sorted, rank_in_runs, split_by
 from gpusim.schemes.common.reorder import submitted_primitives
 
 #: operations whose result a later dependent operation waits for
@@ -155,29 +155,6 @@ class _Piece:
     def operations(self) -> int:
         """Memory operations of the piece (ALU work has none)."""
         return 0 if self.instructions is not None else len(self.thread)
-
-
-def split_by(values: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """Each distinct value of an integer array with the indices holding it (ascending), in value order:
-    one stable sort, not one scan per value (a k-buffer batch run has thousands of passes)."""
-    if not len(values):
-        return []
-    order = (np.arange(len(values)) if len(values) < 2 or bool((values[1:] >= values[:-1]).all())
-             else np.argsort(_narrow(values), kind="stable"))
-    v = values[order]
-    bounds = [0, *(np.flatnonzero(v[1:] != v[:-1]) + 1).tolist(), len(v)]
-    return [(int(v[a]), order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
-
-
-def _narrow(values: np.ndarray) -> np.ndarray:
-    """Integer ``values`` in the narrowest of uint8 and int16 that holds them (numpy sorts those by radix, the
-    same order in a fraction of the time), else as they are."""
-    lo, hi = int(values.min()), int(values.max())
-    if 0 <= lo and hi < 256:
-        return values.astype(np.uint8)
-    if -2**15 <= lo and hi < 2**15:
-        return values.astype(np.int16)
-    return values
 
 
 def pass_operations(plan: OpPlan) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Helpers for schemes that keep a fixed array of entries per pixel."""
+"""Helpers for schemes that keep a fixed array of entries per pixel, and the array primitives (sorts, runs,
+grouping by value) that the schemes and the timing model share."""
 
 from __future__ import annotations
 
@@ -245,3 +246,26 @@ def count_before_in_pixel(pix: np.ndarray, by_arrival: np.ndarray, flag: np.ndar
     out = np.empty(len(pix), np.int64)
     out[by_arrival] = csum - base
     return out
+
+
+def split_by(values: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """Each distinct value of an integer array with the indices holding it (ascending), in value order:
+    one stable sort, not one scan per value (a k-buffer batch run has thousands of passes)."""
+    if not len(values):
+        return []
+    order = (np.arange(len(values)) if len(values) < 2 or bool((values[1:] >= values[:-1]).all())
+             else np.argsort(_narrow(values), kind="stable"))
+    v = values[order]
+    bounds = [0, *(np.flatnonzero(v[1:] != v[:-1]) + 1).tolist(), len(v)]
+    return [(int(v[a]), order[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def _narrow(values: np.ndarray) -> np.ndarray:
+    """Integer ``values`` in the narrowest of uint8 and int16 that holds them (numpy sorts those by radix, the
+    same order in a fraction of the time), else as they are."""
+    lo, hi = int(values.min()), int(values.max())
+    if 0 <= lo and hi < 256:
+        return values.astype(np.uint8)
+    if -2**15 <= lo and hi < 2**15:
+        return values.astype(np.int16)
+    return values

@@ -22,6 +22,7 @@ from collections import defaultdict
 import numpy as np
 
 from gpusim.opplan import OpGroup, OpPlan, ThreadRange
+from gpusim.schemes.common.arrays import split_by
 from gpusim.shaders import FragmentShader
 
 
@@ -39,11 +40,10 @@ def _pass_threads(g: OpGroup, wanted: list[bool]):
         return
     if g.pass_fn is not None:
         i, seq = g.expand_ops()
-        pp = np.broadcast_to(np.asarray(g.pass_fn(i, seq), np.int64), i.shape)
-        ids = g.thread_ids()
-        for p in np.unique(pp).tolist():
+        ids = g.thread_ids()[i]
+        for p, at in split_by(np.broadcast_to(np.asarray(g.pass_fn(i, seq), np.int64), i.shape)):
             if wanted[p]:
-                yield p, ids[i[pp == p]]
+                yield p, ids[at]
         return
     working = count > 0
     if np.isscalar(g.pass_index):
@@ -51,26 +51,10 @@ def _pass_threads(g: OpGroup, wanted: list[bool]):
         if wanted[p]:
             yield p, g.thread if isinstance(g.thread, ThreadRange) and bool(working.all()) else g.thread_ids()[working]
         return
-    pi = np.asarray(g.pass_index)[working]
     ids = g.thread_ids()[working]
-    order = np.argsort(pi, kind="stable")
-    pi, ids = pi[order], ids[order]
-    cuts = np.flatnonzero(np.diff(pi)) + 1
-    for p, threads in zip(pi[np.r_[0, cuts]].tolist() if len(pi) else [], np.split(ids, cuts)):
+    for p, at in split_by(np.asarray(g.pass_index, np.int64)[working]):
         if wanted[p]:
-            yield p, threads
-
-
-def _dispatch_at(plan: OpPlan, wanted: list[bool]) -> dict[int, int]:
-    """Per pass whose program opens with a ``scoreboard`` operation (a dispatch scoreboard, the k-buffer's
-    proposal 1: the fragment is held from dispatch), the position after that group, where the shader goes. A
-    scoreboard later in the program (MLAB's rasterizer-ordered view: an interlock around the read-modify-write
-    only) leaves the shader first."""
-    first: dict[int, int] = {}
-    for index, g in enumerate(plan.groups):
-        for p, _ in _pass_threads(g, wanted):
-            first.setdefault(p, index)
-    return {p: i + 1 for p, i in first.items() if plan.groups[i].op == "scoreboard"}
+            yield p, ids[at]
 
 
 def shade_fragments(plan: OpPlan, shader: FragmentShader) -> None:
@@ -82,15 +66,18 @@ def shade_fragments(plan: OpPlan, shader: FragmentShader) -> None:
         return
     ranges: dict[int, int] = {}
     parts: dict[int, list[np.ndarray]] = defaultdict(list)
-    for g in plan.groups:
-        if g.is_compute and g.instructions is not None and not int(np.max(g.instructions, initial=0)):
-            continue
+    first: dict[int, int] = {}           # each pass's first group in program order
+    for index, g in enumerate(plan.groups):
         for p, threads in _pass_threads(g, wanted):
+            first.setdefault(p, index)
             if isinstance(threads, ThreadRange):
                 ranges[p] = max(ranges.get(p, 0), len(threads))
             else:
                 parts[p].append(np.asarray(threads, np.int64))
-    position = _dispatch_at(plan, wanted)
+    # a pass whose program opens with a ``scoreboard`` (a dispatch scoreboard, the k-buffer's proposal 1: the
+    # fragment is held from dispatch) shades right after it; a later one (MLAB's rasterizer-ordered view, an
+    # interlock around the read-modify-write only) leaves the shader first
+    position = {p: i + 1 for p, i in first.items() if plan.groups[i].op == "scoreboard"}
     inserts: list[tuple[int, OpGroup]] = []
     whole: dict[tuple[int, int, int], list[int]] = defaultdict(list)    # (range, instructions, position): passes
 
