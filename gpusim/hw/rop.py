@@ -142,70 +142,89 @@ class RopUnit(Unit):
         """The cycle the result is back (a depth or stencil test), or ``now`` when the warp need not wait; or
         an event to wait for (a free reorder-buffer entry, the result's commit) before issuing again."""
         a, b = self.lo[wi], self.hi[wi]
-        if self.framebuffer is not None and wi not in self.placed:
+        placed = self.placed
+        if self.framebuffer is not None and wi not in placed:
             self.framebuffer(wi, (now + self.icn) * FP)
-        for i in range(self.placed.get(wi, a), b):
-            p = self.pred[i]
-            if p >= 0 and self.commit[p] < 0:             # must wait for the previous op on its address
+        pred, commit, arrive, commit_op = self.pred, self.commit, self.arrive, self._commit
+        at = now + self.icn
+        for i in range(placed.get(wi, a), b):
+            p = pred[i]
+            if p >= 0 and commit[p] < 0:             # must wait for the previous op on its address
                 u = self.unit[i]
-                if self.held[u] >= self.entries + self.extra[u]:     # full: the warp stalls
-                    self.placed[wi] = i
+                held = self.held
+                if held[u] >= self.entries + self.extra[u]:     # full: the warp stalls
+                    placed[wi] = i
                     self.stalls += 1
                     if self.space[u] is None:
                         self.space[u] = self.env.event()
                     if self.stalled[u] is None or self.age[i] < self.age[self.stalled[u]]:
                         self.stalled[u] = i
                     return self.space[u]
-                self.held[u] += 1
-                if self.held[u] > self.max_held[u]:
-                    self.max_held[u] = self.held[u]
-                self.arrive[i] = now + self.icn
+                held[u] += 1
+                if held[u] > self.max_held[u]:
+                    self.max_held[u] = held[u]
+                arrive[i] = at
                 self.waiting_on.setdefault(p, []).append(i)
             else:
-                self.arrive[i] = now + self.icn
-                self._commit(i)
-        self.placed[wi] = b
+                arrive[i] = at
+                commit_op(i)
+        placed[wi] = b
         if not self.produces[wi]:
             return now
-        value = now
+        value, tail = now, self.latency + self.icn
         for i in range(a, b):
-            if self.commit[i] < 0:
+            c = commit[i]
+            if c < 0:
                 ev = self.commit_events.get(i)
                 if ev is None:
                     ev = self.commit_events[i] = self.env.event()
                 return ev
-            value = max(value, self.commit[i] + self.latency + self.icn)
+            if c + tail > value:
+                value = c + tail
         return value
 
     def _commit(self, i: int) -> None:
-        """Commit operation ``i`` and every operation waiting in a buffer that can follow it."""
-        stack = [i]
-        while stack:
-            i = stack.pop()
-            u, p = self.unit[i], self.pred[i]
-            others = self.others
+        """Commit operation ``i`` and every operation waiting in a buffer that can follow it (the last one
+        to be released first)."""
+        unit, pred, arrive, free, service, commit = self.unit, self.pred, self.arrive, self.free, self.service, \
+            self.commit
+        others, latency, waiting_on, commit_events = self.others, self.latency, self.waiting_on, self.commit_events
+        stack = None
+        while True:
+            u, p = unit[i], pred[i]
             if others is not None and self.last[u] != self.row_wi[i]:   # a sample: the other operations that
-                self.free[u] += self.after[u]                          # came with the instruction before
+                free[u] += self.after[u]                               # came with the instruction before
                 self.after[u], self.last[u] = 0, self.row_wi[i]
-            start = max(self.arrive[i] * FP, self.free[u], (self.commit[p] * FP) if p >= 0 else 0)
-            end = start + self.service[i]
-            self.free[u] = end
+            start = arrive[i] * FP
+            if free[u] > start:
+                start = free[u]
+            if p >= 0 and commit[p] * FP > start:
+                start = commit[p] * FP
+            end = start + service[i]
+            free[u] = end
             if others is not None:
                 self.after[u] += others[i]
-            self.commit[i] = c = -(-end // FP)
-            if c + self.latency > self.drain:
-                self.drain = c + self.latency
-            ev = self.commit_events.pop(i, None)
-            if ev is not None:
-                ev.succeed()
-            for k in self.waiting_on.pop(i, ()):
-                uk = self.unit[k]
-                self.held[uk] -= 1
-                if self.extra[uk] and self.held[uk] < self.entries + self.extra[uk]:
-                    self.extra[uk] -= 1                  # an entry past the buffer's size is given back first
-                if self.space[uk] is not None:
-                    self._wake(uk)
-                stack.append(k)
+            commit[i] = c = -(-end // FP)
+            if c + latency > self.drain:
+                self.drain = c + latency
+            if commit_events:
+                ev = commit_events.pop(i, None)
+                if ev is not None:
+                    ev.succeed()
+            if waiting_on:
+                for k in waiting_on.pop(i, ()):
+                    uk = unit[k]
+                    self.held[uk] -= 1
+                    if self.extra[uk] and self.held[uk] < self.entries + self.extra[uk]:
+                        self.extra[uk] -= 1              # an entry past the buffer's size is given back first
+                    if self.space[uk] is not None:
+                        self._wake(uk)
+                    if stack is None:
+                        stack = []
+                    stack.append(k)
+            if not stack:
+                return
+            i = stack.pop()
 
     def _wake(self, u: int) -> None:
         """Let the warps waiting for an entry of unit ``u`` try again."""
