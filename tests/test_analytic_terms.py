@@ -371,3 +371,15 @@ def test_rop_framebuffer_traffic_goes_through_the_l2():
     full, rec, terms = _both(_blends(), {"fb": 3200 * 4}, 3200, ["rop.ops_per_cycle=100.0", *L2])
     assert full == pytest.approx(1600, abs=40)
     assert rec["passes"][0]["bound"] == "l2" and rec["total"] == pytest.approx(full, rel=0.1)
+
+
+def test_atomics_that_read_and_write_dram_load_its_channel():
+    # 3,200 atomics on distinct words with atomic.dram_rmw: 64 B each through the one channel at 32 B/cycle,
+    # 6,400 cycles, the bound that decides (the unit itself serves 100 a cycle)
+    plan = OpPlan([Pass("count", "fullscreen", "pixel")], ["c"])
+    plan.add(0, "atomic_inc", "c", 3200, 1, lambda i, s: i * 4, 4)
+    full, rec, terms = _both(plan, {"c": 3200 * 4}, 3200, ["atomic.dram_rmw=true"])
+    (bounds, _), = terms
+    assert bounds["dram"] == 6400 and rec["passes"][0]["bound"] == "dram"
+    assert rec["units_built"] == ["dram", "atomic"] and rec["units"]["dram"]["busy_cycles"] == 6400
+    assert abs(rec["total"] / full - 1) < 0.02, (rec["total"], full)

@@ -91,7 +91,9 @@ def test_a_sample_keeps_the_runs_load_on_each_shared_instance_and_word(spheres):
     hits = rows.address == word
     assert hits.any() and program.hold_scale[hits].sum() == pytest.approx((every.address == word).sum())
     # per pass and partition: the kept bytes times the factor are the run's bytes
+    from gpusim.hw.atomic import DRAM_RMW_BYTES
     from gpusim.hw.unit import interleave
+    assert gpu.atomic.dram_rmw
     mem = gpu.memory
     loads = []
     for prog in (program, whole):
@@ -99,6 +101,10 @@ def test_a_sample_keeps_the_runs_load_on_each_shared_instance_and_word(spheres):
         load = np.zeros((len(prog.passes), mem.partitions))
         np.add.at(load, (prog.wi_pass[wi_row], interleave(rws.address, mem.interleave_bytes, mem.partitions)),
                   np.broadcast_to(rws.nbytes, rws.address.shape))
+        # gtx280's atomics read and write their sectors in DRAM (atomic.dram_rmw): 64 B each on its partition
+        arws, (_, _, awi_row) = prog.rows_of("atomic"), prog.storage("atomic")
+        np.add.at(load, (prog.wi_pass[awi_row], interleave(arws.address, mem.interleave_bytes, mem.partitions)),
+                  DRAM_RMW_BYTES)
         loads.append(load)
     has = loads[0] > 0
     assert has.sum() > 8 and np.allclose((loads[0] * program.occupancy["memory"])[has], loads[1][has])

@@ -16,7 +16,7 @@ SIMPLE = ["core.sms=1", "core.lanes_per_sm=32", "core.instructions_per_op=0", "c
           "memory.partitions=1", "memory.interconnect_latency=0", "coalescer.segment_bytes=32",
           "dram.latency=100", "dram.bytes_per_cycle=32.0", "atomic.latency=50", "atomic.ops_per_cycle=100.0",
           "atomic.same_address_cycles=10", "rop.units=1", "rop.latency=0", "rop.ops_per_cycle=1.0",
-          "runner.no_progress_cycles=100000", "driver.pass_us=0"]
+          "runner.no_progress_cycles=100000", "driver.pass_us=0", "atomic.dram_rmw=false"]
 
 
 def simulate(plan: OpPlan, sizes: dict, threads: int, extra=(), width=64):
@@ -48,6 +48,33 @@ def test_two_warps_on_one_address_serialize():
     assert cycles == 63 * 10 + 50        # last start 630, latency 50
     assert m.built_units() == ["core", "atomic"]
     assert m.units["atomic"].summary(cycles)["hottest_address_ops"] == 64
+
+
+def test_atomics_that_read_and_write_dram_hold_its_channel():
+    # atomic.dram_rmw: each atomic reads and writes its 32-byte sector, 64 B at 32 B/cycle = 2 cycles of the one
+    # channel. Warp 0's 32 atomics on distinct words take it from cycle 0 to 64; warp 1's reach it at cycle 1 and
+    # start at 64 (latency 50: done at 114), holding it to 128, when the pass ends
+    plan = compute_plan(["c"])
+    plan.add(0, "atomic_inc", "c", 64, 1, lambda i, s: i * 4, 4)
+    cycles, m = simulate(plan, {"c": 256}, 64, ["atomic.dram_rmw=true"])
+    assert cycles == 128
+    assert m.built_units() == ["core", "dram", "atomic"]
+    dram = m.unit_summaries(cycles)["dram"]
+    assert dram["requests"] == 64 * 2 and dram["busy_cycles"] == 128
+    # without it the unit serves them at 100 a cycle and the pass ends with warp 1's latency: 1 + 50
+    plain, m2 = simulate(plan, {"c": 256}, 64)
+    assert plain == 51 and m2.built_units() == ["core", "atomic"]
+
+
+def test_dram_atomics_queue_with_the_cores_loads():
+    # warp 0: 32 atomics on distinct words (64 cycles of the channel from cycle 0); warp 1: a load of 32 x 4 B,
+    # 4 sectors = 128 B = 4 cycles, reaching the channel at cycle 1 behind the atomics: 64 + 4 + 100 latency
+    plan = compute_plan(["c", "a"])
+    plan.add(0, "atomic_inc", "c", np.arange(32), 1, lambda i, s: i * 4, 4)
+    plan.add(0, "load", "a", np.arange(32, 64), 1, lambda i, s: (i - 32) * 4, 4)
+    cycles, m = simulate(plan, {"c": 128, "a": 128}, 64, ["atomic.dram_rmw=true"])
+    assert cycles == 64 + 4 + 100
+    assert m.unit_summaries(cycles)["dram"]["busy_cycles"] == 64 + 4
 
 
 def test_bandwidth_bound_stream():

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpusim.hw.atomic import DRAM_RMW_BYTES
 from gpusim.hw.collector import collector_paused
 from gpusim.hw.core import SimtCore, flush_cycles
 from gpusim.hw.driver import pass_overhead_cycles
@@ -1129,6 +1130,10 @@ class _PassTimer:
                 atomic_ops[p] += ops
                 if warp_ops is not None:
                     demand["atomic"] += warp_ops / (gpu.atomic.ops_per_cycle * m.partitions)
+                if gpu.atomic.dram_rmw:          # each reads and writes its sector in DRAM
+                    dram_bytes[p] += ops * DRAM_RMW_BYTES
+                    if warp_ops is not None:
+                        demand["dram"] += warp_ops * (DRAM_RMW_BYTES / (gpu.dram.bytes_per_cycle * m.partitions))
                 hottest[p] = max(hottest[p], float(_hottest(addr)))
                 # lanes of one instruction on one word serialize: the instruction's result waits for its busiest
                 # word's operations, same_address_cycles apart
@@ -1323,7 +1328,8 @@ def _analytic_timing(result, work, gpu, interpolate: bool) -> dict:
     total = sum(x["cycles"] for x in passes)
     wis, _, dram_bytes, atomic_ops, _, rop_unit, _ = arrays
     every = set().union(*used)
-    memory = MEM in every or (ROP in every and framebuffer_traffic(gpu))     # the ROPs' framebuffer traffic too
+    # the ROPs' framebuffer traffic too, and atomics that read and write DRAM
+    memory = MEM in every or (ROP in every and framebuffer_traffic(gpu)) or (ATOMIC in every and gpu.atomic.dram_rmw)
     units_built = [name for name, on in (("dram", memory), ("atomic", ATOMIC in every), ("rop", ROP in every),
                                          ("scoreboard", SCOREBOARD in every)) if on]
     busy = {"dram": dram_bytes.sum() / gpu.dram.bytes_per_cycle, "atomic": atomic_ops.sum() / gpu.atomic.ops_per_cycle,

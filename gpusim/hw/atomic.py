@@ -11,6 +11,15 @@ dependent atomicMin operations in the multi-depth test scheme.
 
 A lane completes ``atomic.latency`` cycles after its operation starts, plus
 the interconnect back to the core.
+
+Where the partition has no cache on the global-memory path (``atomic.dram_rmw``:
+GT200, whose L2 holds textures only), an atomic is a read-modify-write of its
+word's 32-byte sector in the partition's DRAM channel: each operation holds the
+channel for the sector's read and its write (2 x 32 bytes at
+``dram.bytes_per_cycle``), in the same queue as the cores' loads and stores, and
+starts no earlier than the channel is free. Fermi and later GPUs perform
+atomics in their L2 slices (NVIDIA's Fermi compute architecture whitepaper,
+2009: atomics 5-20x faster than GT200's), which ``dram_rmw = false`` models.
 """
 
 from __future__ import annotations
@@ -20,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.config import param
+from gpusim.hw.memory.level import SECTOR
 from gpusim.hw.unit import (BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, address_ids, cycles, div, fp_costs,
                             interleave, mod, occupancy, register_unit)
 from gpusim.metrics.composite import run_starts
@@ -34,6 +44,19 @@ class AtomicConfig:
     ops_per_cycle: float = param(1.0, unit="ops/cycle", doc="atomic throughput per partition", gt=0)
     same_address_cycles: int = param(60, unit="cycles", doc="occupancy of one address by one atomic: "
                                      "operations on the same address serialize at this interval", min=1)
+    dram_rmw: bool = param(False, doc="each operation reads and writes its 32-byte sector in the partition's "
+                           "DRAM channel, holding it for both in the queue of the cores' requests (a GPU with no "
+                           "cache on the global-memory path, as GT200); false: atomics are served in the partition "
+                           "(an L2 slice's atomic unit, Fermi and later) and take no DRAM time")
+
+
+#: DRAM bytes one atomic moves where ``atomic.dram_rmw`` is set: its sector read, then written back
+DRAM_RMW_BYTES = 2 * SECTOR
+
+
+def dram_atomics(program, gpu) -> bool:
+    """Whether ``program``'s atomics on ``gpu`` read and write DRAM (``atomic.dram_rmw``, and it issues any)."""
+    return bool(gpu.atomic.dram_rmw and AtomicUnit.issued & program.operation_names())
 
 
 @register_unit
@@ -69,6 +92,17 @@ class AtomicUnit(Unit):
             cost = occupancy(cost, prog.wi_pass[cell_wi], cell_part, prog, "atomic")
             self.run_busy_fp = np.bincount(cell_part, weights=cost, minlength=P).tolist()
         self.requests = np.bincount(cell_part, weights=nops[hit], minlength=P).astype(np.int64).tolist()
+        # the DRAM channel each cell's read-modify-writes hold (atomic.dram_rmw), or None
+        self.dram = machine.units.get("dram") if config.dram_rmw else None
+        self.dram_free = self.dram_held = None
+        if self.dram is not None:
+            dram_cost = fp_costs(nops[hit] * DRAM_RMW_BYTES, self.dram.rate)
+            held = self.dram.occupy(dram_cost, cell_wi, cell_part)      # a sample: the run's share of the channel
+            self.dram.busy_fp = (np.asarray(self.dram.busy_fp) + np.bincount(cell_part, weights=dram_cost,
+                                                                              minlength=P)).astype(np.int64).tolist()
+            self.dram.requests = (np.asarray(self.dram.requests) + 2 * np.bincount(
+                cell_part, weights=nops[hit], minlength=P)).astype(np.int64).tolist()
+            self.dram_free, self.dram_held = self.dram.free, np.asarray(held, np.int64).tolist()
         # flat lists: instruction wi owns cells cells_of[wi]:cells_of[wi + 1]; cell j its lanes' address ids
         # lanes_of[j]:lanes_of[j + 1], grouped by cell (a stable sort: the lanes of one address, all in one
         # partition, stay in lane order)
@@ -94,10 +128,15 @@ class AtomicUnit(Unit):
         arrive = (now + self.icn) * FP
         free, hold, address_free, lane_address = self.free, self.hold, self.address_free, self.lane_address
         cell_part, cell_cost, lanes_of = self.cell_part, self.cell_cost, self.lanes_of
+        dram_free, dram_held = self.dram_free, self.dram_held
         last = 0
         for j in range(self.cells_of[wi], self.cells_of[wi + 1]):
             p = cell_part[j]
             start = free[p] if free[p] > arrive else arrive
+            if dram_free is not None:                 # its sectors' reads and writes wait for the DRAM channel
+                if dram_free[p] > start:
+                    start = dram_free[p]
+                dram_free[p] = start + dram_held[j]
             free[p] = start + cell_cost[j]
             taken = -(-start // FP)          # the cycle this partition's unit takes the instruction's lanes
             if taken > last:
@@ -120,10 +159,15 @@ class AtomicUnit(Unit):
         arrive = (now + self.icn) * FP
         free, address_free, lane_address, lane_hold = self.free, self.address_free, self.lane_address, self.lane_hold
         cell_part, cell_cost, lanes_of = self.cell_part, self.cell_cost, self.lanes_of
+        dram_free, dram_held = self.dram_free, self.dram_held
         last, until = 0, self.until
         for j in range(self.cells_of[wi], self.cells_of[wi + 1]):
             p = cell_part[j]
             start = free[p] if free[p] > arrive else arrive
+            if dram_free is not None:
+                if dram_free[p] > start:
+                    start = dram_free[p]
+                dram_free[p] = start + dram_held[j]
             free[p] = start + cell_cost[j]
             taken = -(-start // FP)
             if taken > last:

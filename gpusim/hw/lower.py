@@ -600,15 +600,22 @@ def _run_loads(pieces, plan: OpPlan, gpu, n_pass: int) -> dict:
 def _unit_keys(op: str, pass_index, address: np.ndarray, nbytes, gpu) -> list[tuple]:
     """The shared units operations ``op`` load, each (name, instances, instance key per row: pass x instances
     + instance, load per row): the memory partitions (bytes), the atomic units and ROPs (one per operation);
-    a ROP's framebuffer reads and writes load the memory partitions too."""
+    a ROP's framebuffer reads and writes load the memory partitions too, and so do atomics that read and
+    write their sectors in DRAM (``atomic.dram_rmw``)."""
+    from gpusim.hw.atomic import DRAM_RMW_BYTES
     mem = gpu.memory
-    memory = ("memory", mem.partitions, 1)
-    instances = {"coalescer": (memory,), "atomic": (("atomic", mem.partitions, None),),
-                 "rop": (("rop", gpu.rop.units, None),) + (((*memory[:2], 2),) if framebuffer_traffic(gpu) else ())}
+    P = mem.partitions
+    # (unit, instances, load per byte of the operation, or None: load per operation)
+    instances = {"coalescer": (("memory", P, 1.0, 0.0),),
+                 "atomic": (("atomic", P, None, 1.0),) + ((("memory", P, None, float(DRAM_RMW_BYTES)),)
+                                                          if gpu.atomic.dram_rmw else ()),
+                 "rop": (("rop", gpu.rop.units, None, 1.0),) + ((("memory", P, 2.0, 0.0),)
+                                                                 if framebuffer_traffic(gpu) else ())}
     out = []
-    for name, n, per_byte in instances.get(entry_unit(op), ()):
+    for name, n, per_byte, per_op in instances.get(entry_unit(op), ()):
         key = np.asarray(pass_index, np.int64) * n + interleave(address, mem.interleave_bytes, n)
-        weight = np.broadcast_to(1.0 if per_byte is None else per_byte * np.asarray(nbytes, np.float64), key.shape)
+        weight = np.broadcast_to(per_op if per_byte is None else per_byte * np.asarray(nbytes, np.float64),
+                                 key.shape)
         out.append((name, n, key, weight))
     return out
 

@@ -4,7 +4,9 @@ Requests that reach a channel straight from the coalescer are served an
 instruction at a time: an instruction's requests to one partition back to
 back, ``bytes / dram.bytes_per_cycle`` together, from when they arrive or the
 channel frees; they complete ``dram.latency`` later. A request from a level
-above (an L2 miss, with any dirty line it evicts) is served on its own.
+above (an L2 miss, with any dirty line it evicts) is served on its own. Where
+``atomic.dram_rmw`` is set, the partition's atomic unit holds the channel for
+each operation's sector read and write (gpusim.hw.atomic).
 """
 
 from __future__ import annotations
@@ -31,6 +33,12 @@ class DramChannel(MemoryLevel):
     name = "dram"
     Config = DramConfig
     terminal = True
+
+    @classmethod
+    def needed(cls, program, gpu) -> bool:
+        """Also where the atomic units read and write their sectors in DRAM (``atomic.dram_rmw``)."""
+        from gpusim.hw.atomic import dram_atomics
+        return super().needed(program, gpu) or (cls.name in gpu.memory.levels and dram_atomics(program, gpu))
 
     def __init__(self, config: DramConfig, machine):
         super().__init__(machine)
