@@ -95,14 +95,10 @@ class AtomicUnit(Unit):
         # the DRAM channel each cell's read-modify-writes hold (atomic.dram_rmw), or None
         self.dram = machine.units.get("dram") if config.dram_rmw else None
         self.dram_free = self.dram_held = None
-        if self.dram is not None:
-            dram_cost = fp_costs(nops[hit] * DRAM_RMW_BYTES, self.dram.rate)
-            held = self.dram.occupy(dram_cost, cell_wi, cell_part)      # a sample: the run's share of the channel
-            self.dram.busy_fp = (np.asarray(self.dram.busy_fp) + np.bincount(cell_part, weights=dram_cost,
-                                                                              minlength=P)).astype(np.int64).tolist()
-            self.dram.requests = (np.asarray(self.dram.requests) + 2 * np.bincount(
-                cell_part, weights=nops[hit], minlength=P)).astype(np.int64).tolist()
-            self.dram_free, self.dram_held = self.dram.free, np.asarray(held, np.int64).tolist()
+        if self.dram is not None:           # a read and a write of each operation's sector
+            self.dram_held = self.dram.serve_for(fp_costs(nops[hit] * DRAM_RMW_BYTES, self.dram.rate), cell_wi,
+                                                 cell_part, 2 * nops[hit])
+            self.dram_free = self.dram.free
         # flat lists: instruction wi owns cells cells_of[wi]:cells_of[wi + 1]; cell j its lanes' address ids
         # lanes_of[j]:lanes_of[j + 1], grouped by cell (a stable sort: the lanes of one address, all in one
         # partition, stay in lane order)

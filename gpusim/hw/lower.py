@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from gpusim.errors import GpusimError
+from gpusim.hw.atomic import DRAM_RMW_BYTES
 from gpusim.hw.program import COMPUTE, PassProgram, Program, Rows
 from gpusim.hw.raster import INDEX_BYTES, bbox_pixels, emission, quad_ids, screen_quads
 from gpusim.hw.rop import framebuffer_traffic
@@ -602,20 +603,18 @@ def _unit_keys(op: str, pass_index, address: np.ndarray, nbytes, gpu) -> list[tu
     + instance, load per row): the memory partitions (bytes), the atomic units and ROPs (one per operation);
     a ROP's framebuffer reads and writes load the memory partitions too, and so do atomics that read and
     write their sectors in DRAM (``atomic.dram_rmw``)."""
-    from gpusim.hw.atomic import DRAM_RMW_BYTES
     mem = gpu.memory
     P = mem.partitions
-    # (unit, instances, load per byte of the operation, or None: load per operation)
-    instances = {"coalescer": (("memory", P, 1.0, 0.0),),
-                 "atomic": (("atomic", P, None, 1.0),) + ((("memory", P, None, float(DRAM_RMW_BYTES)),)
-                                                          if gpu.atomic.dram_rmw else ()),
-                 "rop": (("rop", gpu.rop.units, None, 1.0),) + ((("memory", P, 2.0, 0.0),)
-                                                                 if framebuffer_traffic(gpu) else ())}
+    # (unit, instances, load per operation, load per byte of it)
+    instances = {"coalescer": (("memory", P, 0.0, 1.0),),
+                 "atomic": (("atomic", P, 1.0, 0.0),) + ((("memory", P, float(DRAM_RMW_BYTES), 0.0),)
+                                                         if gpu.atomic.dram_rmw else ()),
+                 "rop": (("rop", gpu.rop.units, 1.0, 0.0),) + ((("memory", P, 0.0, 2.0),)
+                                                                if framebuffer_traffic(gpu) else ())}
     out = []
-    for name, n, per_byte, per_op in instances.get(entry_unit(op), ()):
+    for name, n, per_op, per_byte in instances.get(entry_unit(op), ()):
         key = np.asarray(pass_index, np.int64) * n + interleave(address, mem.interleave_bytes, n)
-        weight = np.broadcast_to(per_op if per_byte is None else per_byte * np.asarray(nbytes, np.float64),
-                                 key.shape)
+        weight = np.broadcast_to(per_op + per_byte * np.asarray(nbytes, np.float64), key.shape)
         out.append((name, n, key, weight))
     return out
 

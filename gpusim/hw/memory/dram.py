@@ -92,6 +92,18 @@ class DramChannel(MemoryLevel):
                 end = e
         return -(-end // FP) + self.latency
 
+    def serve_for(self, cost_fp: np.ndarray, wi: np.ndarray, partition: np.ndarray, requests: np.ndarray) -> list:
+        """Work another unit does in the channels (the atomic units' read-modify-writes, ``atomic.dram_rmw``):
+        ``cost_fp`` sub-cycles of ``requests`` requests per (instruction ``wi``, ``partition``) cell, counted in
+        the channels' busy cycles and requests; how long each cell holds its channel (:meth:`occupy`). The other
+        unit takes the channel, from its ``free`` sub-cycle, as it serves the cell."""
+        P = self.instances
+        self.busy_fp = (np.asarray(self.busy_fp) + np.bincount(partition, weights=cost_fp, minlength=P)
+                        ).astype(np.int64).tolist()
+        self.requests = (np.asarray(self.requests) + np.bincount(partition, weights=requests, minlength=P)
+                         ).astype(np.int64).tolist()
+        return np.asarray(self.occupy(cost_fp, wi, partition), np.int64).tolist()
+
     def request_costs(self, nbytes: np.ndarray) -> np.ndarray:
         return fp_costs(nbytes, self.rate)
 
