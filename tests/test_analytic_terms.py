@@ -271,6 +271,28 @@ def test_a_triangle_threads_warp_runs_each_iteration_as_long_as_its_longest_lane
     assert abs(bounds["latency"] / full - 1) < 0.02, (bounds["latency"], full)
 
 
+def test_a_triangle_threads_iteration_runs_each_group_as_often_as_its_busiest_lane():
+    # two triangles of one fragment each in one warp: the first's fragment loads 2 words and then stores (the
+    # store waits for the loads), the second's loads 40 words and stores nothing (FreePipe MDTS's colour pass:
+    # a dropped fragment searches every entry). SIMT: the warp issues the 40 loads, then the store waits for
+    # the last of them, whichever lane's: 40 + (100 + 1) + 1 cycles, not the longest lane's max(2 + 101 + 1, 40)
+    # (a load's round trip is its instructions' mean: the first 2 send both lanes' requests to one partition,
+    # 1.05 requests of a cycle each)
+    pixels, prims = np.array([1, 2]), np.array([0, 1])
+    plan = OpPlan([Pass("draw", "geometry", "fragment", software=True)], ["a", "fb"])
+    plan.add(0, "load", "a", 2, np.array([2, 40]), lambda i, s: (i * 64 + s) * 4, 4)
+    writers = np.array([0])
+    plan.add(0, "store", "fb", writers, 1, lambda i, s: pixels[writers[i]] * 4, 4, dep=True)
+    gpu = load_gpu("gtx280", SIMPLE + ["raster.setup_instructions=0", "raster.pixel_instructions=0"])
+    result = _Result(plan, {"a": 2 * 64 * 4, "fb": 64 * 64 * 4})
+    work = Workload(plan, result.bases(), 64, 64, pixels, prims, triangles=2)
+    full = Machine(gpu, lower(work, gpu), 64).run()
+    bounds, extra = _PassTimer(result, work, gpu).time(0)["terms"]
+    prefix = (1 + 100 + 1) + (1 + 100 + 3)         # the warp's 2 triangles' indices (32 B), vertices (96 B)
+    assert bounds["latency"] == pytest.approx(prefix + 40 + (100 + 1.05) + 1)
+    assert abs((bounds["latency"] + extra) / full - 1) < 0.02, (bounds["latency"], extra, full)
+
+
 def test_warps_resident_together_go_through_their_groups_in_step():
     # 30 warps, one on each of 30 SMs, walk 4 dependent loads of 64 B (every warp a round trip apart, so the
     # DRAM serves them in turn and they all end the walk together), then each runs 2,000 ALU cycles on its SM,

@@ -21,8 +21,9 @@ largest of
   the slowest warp, or the SM's warps' chains divided by the resident warps that
   hide each other; a triangle thread's warp (software rasterizer) first loads
   its triangles' indices, then vertices, and runs the setup and its largest
-  bounding box's scan, then each iteration of its threads' loops as long as its
-  longest lane's fragment takes (SIMT);
+  bounding box's scan, then each iteration of its threads' loops: each group
+  of the loop's body as often as the lane that issues it most, a dependent
+  operation waiting once for the warp's last result (SIMT: :class:`_SimtLoop`);
 * dram: requests as the coalescer makes them (one per warp instruction and
   ``coalescer.segment_bytes`` segment its lanes touch, of their bytes there in
   whole sectors), measured on every operation of the lanes of a sample of warps
@@ -298,32 +299,53 @@ def _loop_instructions(tri: np.ndarray, ws: int) -> tuple[np.ndarray, int]:
     return (tri // ws) * iterations + j, iterations
 
 
-def _simt_loops(tri: np.ndarray, step: np.ndarray, inst: np.ndarray, iterations: int, ws: int,
-                n_warps: int) -> np.ndarray:
-    """Per warp of triangle threads, the sum over its loops' iterations of its longest lane's ``step`` there
-    (``tri``, ``step``, ``inst``: each fragment's triangle, cycles, warp instruction from
-    :func:`_loop_instructions`). When every triangle's fragments take the same cycles (no loop of varying length
-    inside), from the warp's lanes sorted by their fragments: between the k-th and the (k+1)-th most fragments the
-    k longest-looping lanes are active, the slowest of them deciding; else from every iteration's longest."""
-    if len(tri) and (len(tri) < 2 or bool((tri[1:] >= tri[:-1]).all())):
-        runs = run_starts(tri)
-        lo, hi = np.minimum.reduceat(step, runs), np.maximum.reduceat(step, runs)
-        if (lo == hi).all():
-            t = tri[runs]
-            n = np.diff(np.append(runs, len(tri))).astype(np.float64)
-            warp = t // ws
-            order = np.lexsort((-n, warp))               # each warp's lanes, the most fragments first
-            warp, n, s = warp[order], n[order], hi[order]
-            big = float(s.max(initial=0.0)) + 1.0
-            running = np.maximum.accumulate(s + warp * big) - warp * big     # the slowest so far, per warp
-            nxt = np.append(n[1:], 0.0)
-            nxt[np.append(warp[1:] != warp[:-1], True)] = 0.0                # a warp's last lane: down to 0
-            return np.bincount(warp, weights=(n - nxt) * running, minlength=n_warps)[:n_warps]
-    order = np.argsort(inst)
-    inst, steps = inst[order], step[order]
-    runs = run_starts(inst)
-    longest = np.maximum.reduceat(steps, runs) if len(runs) else steps
-    return np.bincount(inst[runs] // iterations, weights=longest, minlength=n_warps)[:n_warps]
+class _SimtLoop:
+    """Triangle threads' loops over their fragments (a software rasterizer), per warp: SIMT, a warp runs
+    iteration ``j`` of its threads' loops on its lanes' ``j``-th fragments together. Each group of the loop's
+    body issues as many times as the lane that issues it most (the others idle), and a dependent operation
+    after a producer waits once for the warp's last result, whichever lane's it is. So an iteration lasts the
+    sum over the body's groups of each group's longest lane, not its longest lane's sum: a lane whose fragment
+    is dropped after 20 loads and one that finds its entry at the third and stores there take 20 loads and
+    then the store's wait for the last of them (FreePipe MDTS's colour pass)."""
+
+    def __init__(self, frags, inst: np.ndarray, iterations: int, ws: int, n_warps: int, fragments: int):
+        """``frags``: the pass's fragments (a slice or ids), ``inst`` each one's warp instruction
+        (:func:`_loop_instructions`), of ``n_warps`` warps of ``iterations`` each; ``fragments``: the trace's."""
+        span = n_warps * iterations
+        if span <= 8 * len(inst) + 4096:                  # the warp instructions themselves, dense
+            ids, self.n, self.warp_of = inst, span, None
+        else:                                             # the ones some fragment runs, ranked
+            uniq, ids = np.unique(inst, return_inverse=True)
+            self.n, self.warp_of = len(uniq), uniq // iterations
+        self.iterations, self.n_warps = iterations, n_warps
+        self.id_of = np.zeros(fragments, np.int64)       # per fragment of the trace: its iteration's index
+        self.id_of[frags] = ids
+        self.frags = frags
+        self.cycles = np.zeros(self.n)
+        self._present = None
+
+    def add(self, fr, counts, per_op: float, wait: float) -> None:
+        """A group of the body on fragments ``fr`` (a slice or ids), issuing ``counts`` operations each (one
+        for all, or one per fragment) of ``per_op`` cycles each, and a wait of ``wait`` cycles once per
+        iteration where any of them issues."""
+        whole = isinstance(fr, slice) and isinstance(self.frags, slice) and fr == self.frags
+        if np.ndim(counts) == 0 and whole:                 # every lane the same count: every iteration run
+            if self._present is None:
+                self._present = np.bincount(self.id_of[self.frags], minlength=self.n) > 0
+            most = self._present * float(counts)
+        else:
+            ids = self.id_of[fr]
+            most = np.zeros(self.n)
+            np.maximum.at(most, ids, np.broadcast_to(np.asarray(counts, np.float64), ids.shape))
+        self.cycles += most * per_op
+        if wait:
+            self.cycles += (most > 0) * wait
+
+    def per_warp(self) -> np.ndarray:
+        """Each warp's loop cycles: the sum of its iterations'."""
+        if self.warp_of is None:
+            return self.cycles.reshape(self.n_warps, self.iterations).sum(axis=1)
+        return np.bincount(self.warp_of, weights=self.cycles, minlength=self.n_warps)[:self.n_warps]
 
 
 def _instruction_words(inst: np.ndarray, word: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1059,14 +1081,15 @@ class _PassTimer:
             if triangles else 0
         warps = _PassWarps(mapping, lane_keys, packing, ws, tris, quad_memo, work, gpu)
         warp_issue = np.zeros(warps.n)        # each warp's cycles on its SM's issue port
-        # triangle threads: each fragment's cycles in its iteration of the loop, and the warps' atomic waits
-        loop = np.zeros(len(work.frag_prim)) if triangles else None
+        # triangle threads: each warp's iterations of its loops (SIMT), and the warps' atomic waits
+        loop = None
         if triangles:                         # each fragment's warp instruction (iteration) in its thread's loop
             frags = _as_slice(_covering([ids[i] for i in groups_of_pass[p]]))
             frag_tri = work.frag_prim[frags]
             inst_p, iterations = _loop_instructions(frag_tri, ws)
             frag_inst = np.zeros(len(work.frag_prim), np.int64)
             frag_inst[frags] = inst_p
+            loop = _SimtLoop(frags, inst_p, iterations, ws, warps.n, len(work.frag_prim))
         loop_waits: list = []
         phases = 0.0                          # the groups one after another, each as long as its busiest unit
         fed = mapping == "fragment" and len(lane_keys) > 0     # the front end feeds the warps at its rate
@@ -1194,13 +1217,10 @@ class _PassTimer:
                           rop_unit[p].max() - before[3])
             adds.append((got, add, (thread, issuing.count, issuing.s, sel) if known and issuing is not None
                          and g.seq_pass is not None else None))
-            if loop is not None:                 # each fragment's share of its triangle thread's iteration
-                fr = _as_slice(thread if sel is None else thread[lanes_sel])
-                step = (c0 if uniform else np.asarray(counts, np.float64)) * (
-                    (alu_cost if compute else cost) + (unit_lat if g.dep and produces else 0.0))
-                if g.dep and not produces and lp is not None and not waited:
-                    step = step + lp
-                loop[fr] += step
+            if loop is not None:                 # the group's part of each iteration of its warps' loops
+                loop.add(_as_slice(thread if sel is None else thread[lanes_sel]), c0 if uniform else counts,
+                         (alu_cost if compute else cost) + (unit_lat if g.dep and produces else 0.0),
+                         lp if g.dep and not produces and lp is not None and not waited else 0.0)
                 if g.dep and produces and serial is not None:
                     loop_waits.append(serial)
                 elif g.dep and not produces and lp is not None and not waited and last_serial is not None:
@@ -1216,9 +1236,9 @@ class _PassTimer:
         del adds, chain
         wchain = warps.max_of(lane_chain, chain_keys)
         if mapping == "triangle":
-            # SIMT: a warp runs each iteration of its threads' loops as long as the longest of its lanes' j-th
-            # fragments takes, so its chain is the sum over iterations of the longest, not its longest lane's sum
-            by_iteration = _simt_loops(frag_tri, loop[frags], inst_p, iterations, ws, warps.n)
+            # SIMT: a warp runs each iteration of its threads' loops on its lanes' j-th fragments together
+            # (_SimtLoop), so its chain is the sum over iterations, not its longest lane's sum
+            by_iteration = loop.per_warp()
             for w_ in loop_waits:
                 by_iteration = by_iteration + w_(np.arange(warps.n) * ws)
             wchain = np.maximum(wchain, by_iteration)
