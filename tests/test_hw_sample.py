@@ -108,6 +108,8 @@ def test_a_sample_keeps_the_runs_load_on_each_shared_instance_and_word(spheres):
         loads.append(load)
     has = loads[0] > 0
     assert has.sum() > 8 and np.allclose((loads[0] * program.occupancy["memory"])[has], loads[1][has])
+    # the sample's own load, whose product with the factor less itself is the rest of the GPU's (gpusim.hw.background)
+    assert np.allclose(program.own_load["memory"], loads[0])
 
 
 def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys):
@@ -465,6 +467,7 @@ def test_pieces_of_the_candidate_rows_lower_the_same_samples(scheme, params):
         assert (a.occupancy is None) == (b.occupancy is None)
         for unit in a.occupancy or {}:
             assert np.array_equal(a.occupancy[unit], b.occupancy[unit]), unit
+            assert np.array_equal(a.own_load[unit], b.own_load[unit]), unit
         assert (a.hold_scale is None) == (b.hold_scale is None)
         if a.hold_scale is not None:
             assert np.array_equal(a.hold_scale, b.hold_scale)

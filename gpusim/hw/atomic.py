@@ -17,7 +17,8 @@ GT200, whose L2 holds textures only), an atomic is a read-modify-write of its
 word's 32-byte sector in the partition's DRAM channel: each operation holds the
 channel for the sector's read and its write (2 x 32 bytes at
 ``dram.bytes_per_cycle``), in the same queue as the cores' loads and stores, and
-starts no earlier than the channel is free. Fermi and later GPUs perform
+starts no earlier than the channel is free (in a sampled program, than it has served its
+share of the rest of the GPU's requests: gpusim.hw.background). Fermi and later GPUs perform
 atomics in their L2 slices (NVIDIA's Fermi compute architecture whitepaper,
 2009: atomics 5-20x faster than GT200's), which ``dram_rmw = false`` models.
 """
@@ -94,11 +95,13 @@ class AtomicUnit(Unit):
         self.requests = np.bincount(cell_part, weights=nops[hit], minlength=P).astype(np.int64).tolist()
         # the DRAM channel each cell's read-modify-writes hold (atomic.dram_rmw), or None
         self.dram = machine.units.get("dram") if config.dram_rmw else None
-        self.dram_free = self.dram_held = None
+        self.dram_free = self.dram_cost = self.dram_extra = None
         if self.dram is not None:           # a read and a write of each operation's sector
-            self.dram_held = self.dram.serve_for(fp_costs(nops[hit] * DRAM_RMW_BYTES, self.dram.rate), cell_wi,
-                                                 cell_part, 2 * nops[hit])
-            self.dram_free = self.dram.free
+            dram_cost = fp_costs(nops[hit] * DRAM_RMW_BYTES, self.dram.rate)
+            held = np.asarray(self.dram.serve_for(dram_cost, cell_wi, cell_part, 2 * nops[hit]), np.int64)
+            self.dram_free, self.dram_cost = self.dram.free, dram_cost.tolist()
+            if self.dram.pool is not None:  # a sampled program: the rest of the GPU's, pooled (gpusim.hw.background)
+                self.dram_extra = (held - dram_cost).tolist()
         # flat lists: instruction wi owns cells cells_of[wi]:cells_of[wi + 1]; cell j its lanes' address ids
         # lanes_of[j]:lanes_of[j + 1], grouped by cell (a stable sort: the lanes of one address, all in one
         # partition, stay in lane order)
@@ -124,15 +127,17 @@ class AtomicUnit(Unit):
         arrive = (now + self.icn) * FP
         free, hold, address_free, lane_address = self.free, self.hold, self.address_free, self.lane_address
         cell_part, cell_cost, lanes_of = self.cell_part, self.cell_cost, self.lanes_of
-        dram_free, dram_held = self.dram_free, self.dram_held
+        dram_free, dram_cost, dram_extra = self.dram_free, self.dram_cost, self.dram_extra
         last = 0
         for j in range(self.cells_of[wi], self.cells_of[wi + 1]):
             p = cell_part[j]
             start = free[p] if free[p] > arrive else arrive
-            if dram_free is not None:                 # its sectors' reads and writes wait for the DRAM channel
+            if dram_extra is not None:                # a sample: its channel's share of the pool first
+                start = self.dram.take(p, start, dram_cost[j], dram_extra[j], wi)
+            elif dram_free is not None:               # its sectors' reads and writes wait for the DRAM channel
                 if dram_free[p] > start:
                     start = dram_free[p]
-                dram_free[p] = start + dram_held[j]
+                dram_free[p] = start + dram_cost[j]
             free[p] = start + cell_cost[j]
             taken = -(-start // FP)          # the cycle this partition's unit takes the instruction's lanes
             if taken > last:
@@ -155,15 +160,17 @@ class AtomicUnit(Unit):
         arrive = (now + self.icn) * FP
         free, address_free, lane_address, lane_hold = self.free, self.address_free, self.lane_address, self.lane_hold
         cell_part, cell_cost, lanes_of = self.cell_part, self.cell_cost, self.lanes_of
-        dram_free, dram_held = self.dram_free, self.dram_held
+        dram_free, dram_cost, dram_extra = self.dram_free, self.dram_cost, self.dram_extra
         last, until = 0, self.until
         for j in range(self.cells_of[wi], self.cells_of[wi + 1]):
             p = cell_part[j]
             start = free[p] if free[p] > arrive else arrive
-            if dram_free is not None:
+            if dram_extra is not None:
+                start = self.dram.take(p, start, dram_cost[j], dram_extra[j], wi)
+            elif dram_free is not None:
                 if dram_free[p] > start:
                     start = dram_free[p]
-                dram_free[p] = start + dram_held[j]
+                dram_free[p] = start + dram_cost[j]
             free[p] = start + cell_cost[j]
             taken = -(-start // FP)
             if taken > last:

@@ -373,12 +373,12 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
     if keep is not None:
         masks = sample_masks(pieces, keep, p_first)
         words = _run_words(shared, plan)
-        occupancy = _occupancy(shared, masks, plan, gpu, n_pass)
+        occupancy, own_load = _occupancy(shared, masks, plan, gpu, n_pass)
         for j, (pc, m) in enumerate(zip(pieces, masks)):
             if not m.all():
                 pieces[j] = pc.take(np.flatnonzero(m))
     else:
-        words = occupancy = None
+        words = occupancy = own_load = None
     by_pass: list[list[_Piece]] = [[] for _ in range(n_pass)]
     for pc in pieces:
         if len(pc.thread):
@@ -558,15 +558,17 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
     return Program(passes, units, lo, hi, wi_op, wi_unit, wi_cycles, wi_dep, (wi_op >= 0) & OP_PRODUCES[wi_op],
                    w, pa, g, k, row_sets, work.frag_pixel,
-                   occupancy=occupancy, hold_scale=_hold_scale(words, rows.get("atomic", []), atomic_pass))
+                   occupancy=occupancy, own_load=own_load, hold_scale=_hold_scale(words, rows.get("atomic", []), atomic_pass))
 
 
-def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pass: int) -> dict | None:
+def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu,
+               n_pass: int) -> tuple[dict | None, dict | None]:
     """A sample's ``Program.occupancy``: per shared unit, (passes, instances) factors, the whole run's load on
     each instance in each pass (bytes on the memory partitions, the ROPs' framebuffer reads and writes among
     them; operations on the atomic units and ROPs) over
-    the kept threads' (1 where they put none); None when every factor is 1. The run's loads are counted once
-    per ``pieces`` (``Pieces.loads``)."""
+    the kept threads' (1 where they put none); None when every factor is 1. And ``Program.own_load``, the kept
+    threads' load there (for the same units). The run's loads are counted once per ``pieces``
+    (``Pieces.loads``)."""
     cache = _run_loads(pieces, plan, gpu, n_pass)
     every, kept = cache["every"], {}
     for entries, m in zip(cache["keys"], masks):
@@ -574,7 +576,8 @@ def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu, n_pas
             kept[name] = kept.get(name, 0) + np.bincount(key[m], weights=weight[m], minlength=n_pass * n)
     out = {name: np.where(k > 0, every[name] / np.maximum(k, 1e-9), 1.0).reshape(n_pass, -1)
            for name, k in kept.items()}
-    return {k: v for k, v in out.items() if not (v == 1).all()} or None
+    out = {k: v for k, v in out.items() if not (v == 1).all()}
+    return out or None, {k: kept[k].reshape(n_pass, -1) for k in out} or None
 
 
 def _run_loads(pieces, plan: OpPlan, gpu, n_pass: int) -> dict:

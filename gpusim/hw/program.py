@@ -154,13 +154,15 @@ class Program:
     # A sampled program (gpusim.hw.sample) stands for a whole run on a GPU cut down to some of its SMs; the
     # shared units keep their instances and latencies. ``occupancy``: per shared unit ("memory": the memory
     # partitions' levels, "atomic", "rop"), a (passes, instances) array: the run's load on each instance in each
-    # pass over the sample's (gpusim.hw.unit.occupancy). ``hold_scale``: per atomic row, the run's
+    # pass over the sample's (gpusim.hw.unit.occupancy), and ``own_load`` the sample's own load there (their
+    # product less it is the rest of the GPU's: gpusim.hw.background). ``hold_scale``: per atomic row, the run's
     # operations on its word in its pass over the sample's (a word's chain as long as in the run).
     # ``front_end_cycles``: cycles per triangle of the whole GPU's front end (a list: per pass, a thinned
     # sample's). ``l2_outcomes``: the run's L2
     # outcome of each of its requests, which the sample's requests take (gpusim.hw.memory.warming). None: a
     # whole run.
     occupancy: dict[str, np.ndarray] | None = field(repr=False, default=None)
+    own_load: dict[str, np.ndarray] | None = field(repr=False, default=None)
     hold_scale: np.ndarray | None = field(repr=False, default=None)
     front_end_cycles: float | list[float] | None = None
     l2_outcomes: object | None = field(repr=False, default=None)

@@ -114,7 +114,7 @@ class RopUnit(Unit):
         self.requests = np.bincount(unit, minlength=config.units).tolist()
         self.unit, self.pred, self.service = unit.tolist(), pred.tolist(), service.tolist()
         # a sampled program (gpusim.hw.unit.occupancy): the rest of the GPU's operations that come with an
-        # instruction's hold its unit after them, before the next instruction's
+        # instruction's hold its unit after them, before the next instruction's (gpusim.hw.background)
         held = occupancy(service, self.row_pass, unit, prog, "rop")
         self.others = None if held is service else (held - service).tolist()
         if self.others is not None:

@@ -17,9 +17,12 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   :func:`replicate_sms`). The SMs are whole (each with the GPU's warp slots and lanes: latency hiding
   per SM as in the run). Every other unit keeps all its instances (memory
   partitions, atomic units, ROPs: the same address interleaving, so the same
-  hot partitions) and its latencies, and a request occupies it ``1/s`` as long
-  as it is served (``Program.share``: the rest of the GPU's traffic); the quad
-  rasterizer runs at ``s`` of its rate, the scoreboard ``s`` of its cells.
+  hot partitions) and its latencies, and the rest of the GPU's traffic on it
+  (the run's load on each instance in each pass less the sample's,
+  ``Program.occupancy`` and ``Program.own_load``) is pooled as the sample's
+  requests come and spread over every instance in the run's mix, each taking
+  its share ahead of the sample's next request there (gpusim.hw.background);
+  the quad rasterizer runs at ``s`` of its rate, the scoreboard ``s`` of its cells.
   The L2 (functional warming, gpusim.hw.memory.warming): the whole run's
   requests go through an LRU model of the slices in about the full level's
   issue order, and each request of a sample misses with the share of those

@@ -6,7 +6,9 @@ back, ``bytes / dram.bytes_per_cycle`` together, from when they arrive or the
 channel frees; they complete ``dram.latency`` later. A request from a level
 above (an L2 miss, with any dirty line it evicts) is served on its own. Where
 ``atomic.dram_rmw`` is set, the partition's atomic unit holds the channel for
-each operation's sector read and write (gpusim.hw.atomic).
+each operation's sector read and write (gpusim.hw.atomic). In a sampled
+program a channel also serves its share of the rest of the GPU's requests
+(gpusim.hw.background) ahead of the sample's next one.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.config import param
+from gpusim.hw.background import background
 from gpusim.hw.memory.level import MemoryLevel, Requests
 from gpusim.hw.unit import FP, div, fp_costs, mod, register_unit
 
@@ -43,7 +46,11 @@ class DramChannel(MemoryLevel):
     def __init__(self, config: DramConfig, machine):
         super().__init__(machine)
         self.rate, self.latency = config.bytes_per_cycle, config.latency
-        self._lo = self._hi = self._part = self._cost = self._held = None
+        # a sampled program: the pool of the rest of the GPU's requests (gpusim.hw.background), each
+        # instruction's pass
+        self.pool = background(self.program, "memory")
+        self.wi_pass = self.program.wi_pass.tolist() if self.pool is not None else None
+        self._lo = self._hi = self._part = self._cost = self._extra = None
 
     def prepare(self, chunks: list[Requests], write: np.ndarray) -> None:
         """Per (instruction, partition): the bytes of its requests, served together (dense over each chunk)."""
@@ -74,29 +81,45 @@ class DramChannel(MemoryLevel):
         lo[order], hi[order] = bounds[:-1], bounds[1:]
         self._lo, self._hi, self._part, self._cost = lo.tolist(), hi.tolist(), part.tolist(), cost.tolist()
         held = self.occupy(cost, order[rank], part)
-        self._held = self._cost if held is cost else held.tolist()
+        # a sampled program: what each cell brings to the pool of the rest of the GPU's requests
+        self._extra = None if held is cost else (held - cost).tolist()
 
     def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
-        free, part, cost, held = self.free, self._part, self._cost, self._held
+        free, part, cost, extra = self.free, self._part, self._cost, self._extra
+        pool = self.pool
+        k = self.wi_pass[wi] if pool is not None else 0
         end = 0
         for j in range(self._lo[wi], self._hi[wi]):
             p = part[j]
-            e = free[p]
-            if e < arrive_fp:
-                e = arrive_fp
+            if pool is not None:                # the partition's share of the rest of the GPU's requests first
+                e = pool.start(k, p, free[p], arrive_fp, extra[j])
+            else:
+                e = free[p] if free[p] > arrive_fp else arrive_fp
             if starts is not None:
                 starts[p] = e                   # an instruction has one cell per partition it reaches
-            free[p] = e + held[j]
             e += cost[j]
+            free[p] = e
             if e > end:
                 end = e
         return -(-end // FP) + self.latency
 
+    def take(self, p: int, at_fp: int, cost_fp: int, extra_fp: int, wi: int) -> int:
+        """Channel ``p`` serves ``cost_fp`` sub-cycles of instruction ``wi``'s work (an atomic's read-modify-write,
+        or an L2 miss), from ``at_fp`` or when it is free; in a sampled program it stands for ``extra_fp`` more
+        of the rest of the GPU's (gpusim.hw.background). The sub-cycle it starts."""
+        free = self.free
+        if self.pool is not None:
+            start = self.pool.start(self.wi_pass[wi], p, free[p], at_fp, extra_fp)
+        else:
+            start = free[p] if free[p] > at_fp else at_fp
+        free[p] = start + cost_fp
+        return start
+
     def serve_for(self, cost_fp: np.ndarray, wi: np.ndarray, partition: np.ndarray, requests: np.ndarray) -> list:
         """Work another unit does in the channels (the atomic units' read-modify-writes, ``atomic.dram_rmw``):
         ``cost_fp`` sub-cycles of ``requests`` requests per (instruction ``wi``, ``partition``) cell, counted in
-        the channels' busy cycles and requests; how long each cell holds its channel (:meth:`occupy`). The other
-        unit takes the channel, from its ``free`` sub-cycle, as it serves the cell."""
+        the channels' busy cycles and requests; how long each cell stands for in its channel (:meth:`occupy`).
+        The other unit takes the channel (:meth:`take`) as it serves the cell."""
         P = self.instances
         self.busy_fp = (np.asarray(self.busy_fp) + np.bincount(partition, weights=cost_fp, minlength=P)
                         ).astype(np.int64).tolist()
@@ -107,12 +130,16 @@ class DramChannel(MemoryLevel):
     def request_costs(self, nbytes: np.ndarray) -> np.ndarray:
         return fp_costs(nbytes, self.rate)
 
-    def serve_request(self, partition: int, cost_fp: int, at_fp: int, held_fp: int) -> int:
-        free = self.free
-        start = free[partition] if free[partition] > at_fp else at_fp
-        free[partition] = start + held_fp
+    def serve_request(self, partition: int, cost_fp: int, at_fp: int, held_fp: int, wi: int) -> int:
+        start = self.take(partition, at_fp, cost_fp, held_fp - cost_fp, wi)
         if self.run_busy_fp is not None:
             self.run_busy_fp[partition] += held_fp
         self.busy_fp[partition] += cost_fp
         self.requests[partition] += 1
         return -(-(start + cost_fp) // FP) + self.latency
+
+    def idle_at(self) -> int:
+        """The cycle every channel has served its requests, and in a sampled program its share of what is left
+        in the pool of the rest of the GPU's."""
+        free = self.free if self.pool is None else self.pool.settled(self.free)
+        return -(-max(free) // FP)

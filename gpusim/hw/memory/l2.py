@@ -65,7 +65,7 @@ class L2Slice(MemoryLevel):
         self.misses = [0] * self.instances
         self.table: list = []
         # a sampled program (gpusim.hw.unit.occupancy): what the rest of the GPU's requests add to a slice after
-        # the instruction that came with them, and that instruction
+        # the instruction that came with them, and that instruction (gpusim.hw.background: why here, not pooled)
         self.after, self.last = [0] * self.instances, [-1] * self.instances
         # a sample (gpusim.hw.memory.warming): the run's outcome of each request, where the run has it
         self.outcomes = getattr(self.program, "l2_outcomes", None)
@@ -152,7 +152,7 @@ class L2Slice(MemoryLevel):
                 finish = -(-end // FP) + latency
             else:
                 finish = nxt.serve_request(p, evict_cost if evict else miss_cost, end,
-                                           evict_held if evict else miss_held) + latency
+                                           evict_held if evict else miss_held, wi) + latency
             if finish > done:
                 done = finish
         return done

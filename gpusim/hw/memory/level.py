@@ -14,8 +14,12 @@ name it in ``memory.levels``:
   arriving at sub-cycle ``arrive_fp``; the cycle the last one is back at the
   level's input. ``starts`` (a list per partition, or None) records the
   sub-cycle each partition started serving them, for the RMW-hazard analysis;
-* ``request_costs(nbytes)`` and ``serve_request(partition, cost_fp, at_fp)``:
-  one request from the level above (an L2 miss), the cycle it is back.
+* ``request_costs(nbytes)`` and ``serve_request(partition, cost_fp, at_fp, held_fp, wi)``:
+  one request of instruction ``wi`` from the level above (an L2 miss), the cycle it is back.
+
+In a sampled program a request also stands for the rest of the GPU's requests
+that came with it (:meth:`MemoryLevel.occupy`); each level decides where they
+queue (gpusim.hw.background).
 """
 
 from __future__ import annotations
@@ -116,9 +120,9 @@ class MemoryLevel(Unit):
     def request_costs(self, nbytes: np.ndarray) -> np.ndarray:
         raise NotImplementedError(f"{self.name} cannot sit behind a level that sends single requests")
 
-    def serve_request(self, partition: int, cost_fp: int, at_fp: int, held_fp: int) -> int:
-        """Serve one request of ``cost_fp`` sub-cycles arriving at ``at_fp``; it holds the partition ``held_fp``
-        (:meth:`occupy`); the cycle its data is back."""
+    def serve_request(self, partition: int, cost_fp: int, at_fp: int, held_fp: int, wi: int) -> int:
+        """Serve one request of instruction ``wi`` of ``cost_fp`` sub-cycles arriving at ``at_fp``; it stands
+        for ``held_fp`` of the partition's time (:meth:`occupy`); the cycle its data is back."""
         raise NotImplementedError(f"{self.name} cannot sit behind a level that sends single requests")
 
     def idle_at(self) -> int:
