@@ -14,8 +14,11 @@ instance in the pass over the sample's). Where that work queues:
   of the run's other traffic (per pass and channel, the run's load less the sample's: ``Program.own_load``
   times ``Program.occupancy`` less one). A channel takes its share of what the pool gained since it last
   served, ahead of the sample's next request there: as a fluid that came in since then, a backlog only where
-  it came faster than the channel serves; the rest when the pass ends. A DRAM request is in flight for hundreds of cycles, and in that time the other SMs' requests come
-  from all over the screen and from warps at every point of their programs.
+  it came faster than the channel serves; the rest when the pass ends. A DRAM request is in flight for
+  hundreds of cycles, and in that time the other SMs' requests come from all over the screen and from warps
+  at every point of their programs. Not modelled: the wait a request finds among the other SMs' requests
+  arriving at random at that rate (an M/D/1 queue's mean), so on channels busy but not saturated a sample
+  runs a little fast (docs/timing-model.md, "The sampled level").
 
 Why the pool for the DRAM: a replicate's SMs have a few dozen warps. When each of their requests held its
 channel for the other SMs' requests too, the warps queued on one channel while the others stood idle, where
