@@ -293,6 +293,28 @@ def test_a_triangle_threads_iteration_runs_each_group_as_often_as_its_busiest_la
     assert abs((bounds["latency"] + extra) / full - 1) < 0.02, (bounds["latency"], extra, full)
 
 
+def test_a_simt_loop_indexes_its_iterations_densely_or_ranked_alike():
+    # three warps of 2-lane loops (fragments' warp instructions from their triangles), two groups: one on every
+    # fragment, one on some with counts of their own and a wait; the iterations indexed by warp instruction
+    # (dense) or by rank among those run give the same cycles per warp
+    from gpusim.hw.analytic import _SimtLoop, _loop_instructions
+    tri = np.array([0, 0, 0, 1, 2, 2, 3, 4, 4, 4, 4])
+    inst, iterations = _loop_instructions(tri, 2)
+    frag_inst = np.zeros(len(tri) + 3, np.int64)
+    frags = slice(0, len(tri))
+    frag_inst[frags] = inst
+    some = np.array([1, 2, 4, 8, 9])
+    got = []
+    for dense in (True, False):
+        loop = _SimtLoop(frags, frag_inst, iterations, 3, dense=dense)
+        loop.add(frags, 1, 2.0, 0.0)
+        loop.add(some, np.array([3, 1, 5, 2, 4]), 1.0, 10.0)
+        got.append(loop.per_warp())
+    # warp 0 (triangles 0, 1): iterations 0-2, each 2 + the second group's most there (0, 3, 1), waits on 2
+    # warp 1 (2, 3): iterations 0-1, 2 each + (5 + 10) at iteration 0; warp 2 (4): iterations 0-3 + (2, 4) and waits
+    assert got[0].tolist() == got[1].tolist() == [3 * 2 + 3 + 1 + 2 * 10, 2 * 2 + 5 + 10, 4 * 2 + 2 + 4 + 2 * 10]
+
+
 def test_warps_resident_together_go_through_their_groups_in_step():
     # 30 warps, one on each of 30 SMs, walk 4 dependent loads of 64 B (every warp a round trip apart, so the
     # DRAM serves them in turn and they all end the walk together), then each runs 2,000 ALU cycles on its SM,

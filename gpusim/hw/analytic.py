@@ -308,18 +308,23 @@ class _SimtLoop:
     is dropped after 20 loads and one that finds its entry at the third and stores there take 20 loads and
     then the store's wait for the last of them (FreePipe MDTS's colour pass)."""
 
-    def __init__(self, frags, inst: np.ndarray, iterations: int, ws: int, n_warps: int, fragments: int):
-        """``frags``: the pass's fragments (a slice or ids), ``inst`` each one's warp instruction
-        (:func:`_loop_instructions`), of ``n_warps`` warps of ``iterations`` each; ``fragments``: the trace's."""
+    def __init__(self, frags, frag_inst: np.ndarray, iterations: int, n_warps: int, dense: bool | None = None):
+        """``frags``: the pass's fragments (a slice or ids); ``frag_inst``: per fragment of the trace, its warp
+        instruction (:func:`_loop_instructions`), of ``n_warps`` warps of ``iterations`` each. ``dense``: index
+        the iterations by the warp instructions themselves (by default where there are not many more of them
+        than fragments), else rank the ones some fragment runs."""
+        inst = frag_inst[frags]
         span = n_warps * iterations
-        if span <= 8 * len(inst) + 4096:                  # the warp instructions themselves, dense
-            ids, self.n, self.warp_of = inst, span, None
-        else:                                             # the ones some fragment runs, ranked
+        if dense is None:
+            dense = span <= 8 * len(inst) + 4096
+        if dense:
+            self.id_of, self.n, self.warp_of = frag_inst, span, None     # per fragment: its iteration's index
+        else:
             uniq, ids = np.unique(inst, return_inverse=True)
             self.n, self.warp_of = len(uniq), uniq // iterations
+            self.id_of = np.zeros(len(frag_inst), np.int64)
+            self.id_of[frags] = ids
         self.iterations, self.n_warps = iterations, n_warps
-        self.id_of = np.zeros(fragments, np.int64)       # per fragment of the trace: its iteration's index
-        self.id_of[frags] = ids
         self.frags = frags
         self.cycles = np.zeros(self.n)
         self._present = None
@@ -1089,7 +1094,7 @@ class _PassTimer:
             inst_p, iterations = _loop_instructions(frag_tri, ws)
             frag_inst = np.zeros(len(work.frag_prim), np.int64)
             frag_inst[frags] = inst_p
-            loop = _SimtLoop(frags, inst_p, iterations, ws, warps.n, len(work.frag_prim))
+            loop = _SimtLoop(frags, frag_inst, iterations, warps.n)
         loop_waits: list = []
         phases = 0.0                          # the groups one after another, each as long as its busiest unit
         fed = mapping == "fragment" and len(lane_keys) > 0     # the front end feeds the warps at its rate

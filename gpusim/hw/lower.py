@@ -558,7 +558,8 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
     return Program(passes, units, lo, hi, wi_op, wi_unit, wi_cycles, wi_dep, (wi_op >= 0) & OP_PRODUCES[wi_op],
                    w, pa, g, k, row_sets, work.frag_pixel,
-                   occupancy=occupancy, own_load=own_load, hold_scale=_hold_scale(words, rows.get("atomic", []), atomic_pass))
+                   occupancy=occupancy, own_load=own_load,
+                   hold_scale=_hold_scale(words, rows.get("atomic", []), atomic_pass))
 
 
 def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu,

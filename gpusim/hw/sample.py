@@ -19,10 +19,12 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   partitions, atomic units, ROPs: the same address interleaving, so the same
   hot partitions) and its latencies, and the rest of the GPU's traffic on it
   (the run's load on each instance in each pass less the sample's,
-  ``Program.occupancy`` and ``Program.own_load``) is pooled as the sample's
-  requests come and spread over every instance in the run's mix, each taking
-  its share ahead of the sample's next request there (gpusim.hw.background);
-  the quad rasterizer runs at ``s`` of its rate, the scoreboard ``s`` of its cells.
+  ``Program.occupancy`` and ``Program.own_load``) holds an L2 slice, atomic
+  unit or ROP right after the instruction that came with it, and is pooled
+  over every DRAM channel in the run's mix as the sample's requests come, each
+  channel taking its share ahead of the sample's next request there
+  (gpusim.hw.background); the quad rasterizer runs at ``s`` of its rate, the
+  scoreboard ``s`` of its cells.
   The L2 (functional warming, gpusim.hw.memory.warming): the whole run's
   requests go through an LRU model of the slices in about the full level's
   issue order, and each request of a sample misses with the share of those
