@@ -484,6 +484,7 @@ class _PassWarps:
     def __init__(self, mapping: str, keys: np.ndarray, packing: _Packing, ws: int, triangles: int, quads, work,
                  gpu):
         self.keys, self.ws, self.quads = keys, ws, 0
+        self._memo: dict[int, tuple] = {}     # id(keys) -> (keys, their warps): :meth:`of`
         self.scale = None                     # (warps, lanes): a lane's warp is its rank x warps // lanes
         self.contiguous = len(keys) > 0 and int(keys[-1]) - int(keys[0]) + 1 == len(keys)
         if mapping == "fragment" and len(keys):
@@ -511,7 +512,15 @@ class _PassWarps:
         return np.searchsorted(self.keys, keys)
 
     def of(self, keys: np.ndarray) -> np.ndarray:
-        """The warp of each lane key."""
+        """The warp of each lane key (kept for the arrays asked again: a group's threads, the pass's keys)."""
+        memo = self._memo.get(id(keys))
+        if memo is not None and memo[0] is keys:
+            return memo[1]
+        w = self._of(keys)
+        self._memo[id(keys)] = (keys, w)
+        return w
+
+    def _of(self, keys: np.ndarray) -> np.ndarray:
         if self.mode == "triangle":
             return keys // self.ws
         if self.mode == "dispatch":

@@ -16,15 +16,19 @@ instance in the pass over the sample's). Where that work queues:
   served, ahead of the sample's next request there: as a fluid that came in since then, a backlog only where
   it came faster than the channel serves; the rest when the pass ends. A DRAM request is in flight for
   hundreds of cycles, and in that time the other SMs' requests come from all over the screen and from warps
-  at every point of their programs. Not modelled: the wait a request finds among the other SMs' requests
-  arriving at random at that rate (an M/D/1 queue's mean), so on channels busy but not saturated a sample
-  runs a little fast (docs/timing-model.md, "The sampled level").
+  at every point of their programs. Those requests arrive at random, so a request of the sample also finds
+  the mean wait of an M/D/1 queue among them: ``rho x cost / (2 (1 - rho))``, where ``rho`` is the
+  channel's load from the pool since it last served (its share over the time since; at most
+  :data:`RHO_MAX`) and ``cost`` the request's own service, or the fluid's backlog where that is longer.
+  Without it a sample ran a little fast on channels busy but not saturated (LucidRaster on nested spheres
+  at 64x64, gtx280: 3.3% short of the full level; 2.5% with it).
 
 Why the pool for the DRAM: a replicate's SMs have a few dozen warps. When each of their requests held its
 channel for the other SMs' requests too, the warps queued on one channel while the others stood idle, where
 the run's thirty SMs keep every channel busy: a closed queueing network of far fewer customers than the
 run's, which cannot keep its queues busy together. On `foliage` at 384x384 on `gtx280` that put TFSS 15% over
-the full level (7% pooled; the rest is how the sample's warps coalesce). Why not everywhere: pooled at the L2
+the full level (7% pooled; the rest was how the sample's warps coalesce, which the run's coalesced
+traffic sets instead: gpusim.hw.sample.coalesced_load). Why not everywhere: pooled at the L2
 slices, the stencil-routed A-buffer's framebuffer traffic on `modern` spread evenly over the slices, and the
 hot slice's queue, which decides its capture pass, was gone (the pass 20% short on `bunny` at 160x160, 4%
 held behind), and LucidRaster's latency-bound passes there came out 3% further over.
@@ -33,6 +37,11 @@ held behind), and LucidRaster's latency-bound passes there came out 3% further o
 from __future__ import annotations
 
 import numpy as np
+
+
+#: the most load the pool puts on a channel in the M/D/1 wait (its mean grows without bound as the load nears
+#: 1; a channel loaded past this serves the pool's backlog as a fluid instead)
+RHO_MAX = 0.95
 
 
 class Background:
@@ -49,18 +58,28 @@ class Background:
         self.share: list[float] = []      # its shares
         self.pool = 0.0                   # sub-cycles of background the pass's requests have brought so far
         self.seen = [0.0] * self.instances   # the pool when each instance last took its share
+        self.last = [0] * self.instances     # the sub-cycle each instance last took its share
 
-    def start(self, k: int, p: int, free: int, at: int, extra: int) -> int:
-        """The sub-cycle instance ``p``, free from sub-cycle ``free``, starts a sample's request arriving at
-        ``at`` in pass ``k``, which brings ``extra`` sub-cycles of the rest of the GPU's to the pool: after the
-        instance's share of what the pool gained since it last served, as a fluid that came in since then (a
-        backlog only where it came faster than the instance serves)."""
+    def start(self, k: int, p: int, free: int, at: int, extra: int, cost: int) -> int:
+        """The sub-cycle instance ``p``, free from sub-cycle ``free``, starts a sample's request of ``cost``
+        sub-cycles arriving at ``at`` in pass ``k``, which brings ``extra`` sub-cycles of the rest of the GPU's
+        to the pool: after the instance's share of what the pool gained since it last served, as a fluid that
+        came in since then (a backlog only where it came faster than the instance serves), or after the mean
+        wait among those requests arriving at random (M/D/1), whichever is later."""
         if k != self.k:                   # passes are barriers: the last one's pool was settled at its end
             self.k, self.share, self.pool, self.seen = k, self.shares[k], 0.0, [0.0] * self.instances
+            self.last = [at] * self.instances
         pool = self.pool
-        start = free + int((pool - self.seen[p]) * self.share[p])
-        self.seen[p] = pool
+        due = (pool - self.seen[p]) * self.share[p]
+        span = at - self.last[p]
+        start = free + int(due)
+        self.seen[p], self.last[p] = pool, at
         self.pool = pool + extra
+        if span > 0 and due > 0:
+            rho = min(due / span, RHO_MAX)
+            wait = at + round(rho * cost / (2.0 * (1.0 - rho)))
+            if wait > start:
+                start = wait
         return start if start > at else at
 
     def settled(self, free: list[int]) -> list[int]:

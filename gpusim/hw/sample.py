@@ -19,7 +19,9 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   partitions, atomic units, ROPs: the same address interleaving, so the same
   hot partitions) and its latencies, and the rest of the GPU's traffic on it
   (the run's load on each instance in each pass less the sample's,
-  ``Program.occupancy`` and ``Program.own_load``) holds an L2 slice, atomic
+  ``Program.occupancy`` and ``Program.own_load``; on the memory partitions the
+  run's coalesced bytes less the sample's, ``sample.run_traffic``,
+  :func:`coalesced_load`) holds an L2 slice, atomic
   unit or ROP right after the instruction that came with it, and is pooled
   over every DRAM channel in the run's mix as the sample's requests come, each
   channel taking its share ahead of the sample's next request there
@@ -93,6 +95,7 @@ import numpy as np
 
 from gpusim.hw.lower import (Census, Workload, lower, pass_operations, plan_pieces, sample_masks,
                              share_pieces, split_by, thread_mapping)
+from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.memory.warming import Outcomes
 from gpusim.hw.parallel import fork_map, fork_workers
 from gpusim.hw.program import Program
@@ -447,7 +450,7 @@ def _floor(reps: Replicates, r: int | tuple[int, ...]) -> int:
 
 
 def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=None, outcomes=None,
-                       front=None, sms: int | None = None, floor: int | None = None):
+                       front=None, sms: int | None = None, floor: int | None = None, run_bytes=None):
     """Replicate ``r``'s sample of the run (a tuple: the union of those replicates'; of its passes ``passes``,
     from ``pieces``), lowered for the share of the GPU it takes (``sms`` where it is known, else at least
     ``floor``): (the machine's GPU, the program, each pass's thinning: :func:`thinned`)."""
@@ -460,9 +463,25 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=
         mine, machine = fit, scaled_gpu(gpu, fit)
         program = lower(work, machine, keep, passes=passes, pieces=pieces)
     program = dataclasses.replace(program, front_end_cycles=front, l2_outcomes=outcomes)
+    if run_bytes is not None:
+        program = coalesced_load(program, machine, run_bytes)
     if reps.theta >= 1:
         return machine, program, np.ones(len(program.passes))
     return machine, *thinned(program, gpu, mine)
+
+
+def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
+    """A sample's ``program`` on ``gpu`` whose memory partitions are as busy as the run's coalesced traffic makes
+    them, ``run_bytes`` (passes, partitions: :func:`memory_bytes` of the whole run): the "memory" occupancy the
+    run's bytes over the sample's own coalesced bytes (at least 1), and the sample's own load those bytes. A
+    replicate packs into a warp the fragments of tiles that lie far apart, so its warps coalesce worse than the
+    run's; scaled by the operations' bytes, its DRAM was up to 8% busier than the run's."""
+    if program.occupancy is None or "memory" not in program.occupancy:
+        return program
+    mine = memory_bytes(program, gpu)
+    factor = np.where(mine > 0, np.maximum(run_bytes / np.maximum(mine, 1e-9), 1.0), 1.0)
+    return dataclasses.replace(program, occupancy=program.occupancy | {"memory": factor},
+                               own_load=(program.own_load or {}) | {"memory": mine})
 
 
 def thinned(program: Program, gpu, sms: int) -> tuple[Program, np.ndarray]:
@@ -620,11 +639,15 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     if chunks is not None and gpu.l2.size_bytes:       # refused before the chunks are counted, not at the first
         raise carried_state(work, gpu)
     rmw_all = rmw_threads(work.plan, work)
-    pieces = outcomes = None
+    pieces = outcomes = run_bytes = None
     if chunks is None:
         pieces, _ = _pieces(work, gpu, reps, None)
-        if gpu.l2.size_bytes and "l2" in gpu.memory.levels and share < 1:     # the run's L2 outcomes (warming)
-            outcomes = Outcomes(lower(work, gpu), gpu)
+        warm = gpu.l2.size_bytes and "l2" in gpu.memory.levels
+        if share < 1 and (warm or gpu.sample.run_traffic):   # the run's coalesced traffic; on an L2 its outcomes
+            run = lower(work, gpu)
+            run_bytes = memory_bytes(run, gpu) if gpu.sample.run_traffic else None
+            outcomes = Outcomes(run, gpu) if warm else None
+            del run
     count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
     # (sample, fewest SMs): the replicates; where they are thinned, the work checks (pairs of replicates' samples
     # together on the same SMs: twice the work); the scale check (replicates 0 and 1 on their SMs together)
@@ -638,7 +661,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         def replicate(member, gpu=gpu) -> tuple[dict, int]:
             r, floor = member
             machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, outcomes=outcomes,
-                                                         front=front, floor=floor)
+                                                         front=front, floor=floor, run_bytes=run_bytes)
             rec, _ = run_full(work, machine, program=program)
             return _replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
                               rmw_threads(program, work), rmw_all, theta), machine.core.sms
@@ -664,9 +687,11 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
             pieces, _ = _pieces(work, gpu, reps, (first, end))
+            run_bytes = (memory_bytes(lower(work, gpu, passes=(first, end)), gpu)
+                         if reps.share < 1 and gpu.sample.run_traffic else None)
             for i, (r, _) in enumerate(members):
                 machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
-                                                             sms=fit[i])
+                                                             sms=fit[i], run_bytes=run_bytes)
                 streams[i].replay(machine, program, first)
                 ops[i] += [(p.operations, p.operations_total) for p in program.passes]
                 readers[i].append(_rmw_readers(program))

@@ -50,6 +50,83 @@ def instruction_writes(program, framebuffer: bool) -> np.ndarray:
     return write
 
 
+def unit_requests(program, unit: str, wis: np.ndarray, counts: np.ndarray, memory, segment: int) -> list[Requests]:
+    """Coalesced requests of ``unit``'s rows in ``program`` (its instructions ``wis`` in row-storage order, with
+    ``counts`` rows each; ``memory``: the GPU's memory config, ``segment``: the coalescing segment in bytes): part
+    by part (arrays the allocator reuses), or all rows at once when there are many small parts (a k-buffer batch
+    run: thousands), where numpy's per-call cost would dominate."""
+    R = program.rows_of(unit)
+    los = program.row_lo[wis]
+    parts = (zip(R.parts, R.offsets()) if len(R.parts) <= 64
+             else [((None, R.address, R.nbytes, None), 0)])
+    return [q for part, off in parts for q in _requests(part, off, los, counts, wis, memory, segment)]
+
+
+def _requests(part, off: int, los: np.ndarray, counts: np.ndarray, wis: np.ndarray, memory, S: int,
+              chunk: int = 1 << 20) -> list[Requests]:
+    """Coalesced requests of one part of the rows, a chunk of whole instructions at a time (arrays small
+    enough for the allocator to reuse)."""
+    _, address, nbytes, _ = part
+    a, b = np.searchsorted(los, [off, off + len(address)])
+    ends = np.cumsum(counts[a:b])
+    out = []
+    lo = 0
+    while lo < b - a:
+        hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + chunk, side="right")))
+        r0, r1 = (ends[lo - 1] if lo else 0), ends[hi - 1]
+        addr = address[r0:r1]
+        nb = max(int(nbytes), 1) if np.isscalar(nbytes) else np.maximum(nbytes[r0:r1], 1)
+        rank = np.repeat(np.arange(a + lo, a + hi), counts[a + lo:a + hi])
+        span, seg = touched_segments(addr, nb, S)
+        if span is not None:                     # an access wider than a segment touches several
+            nb = np.broadcast_to(nb, addr.shape)
+            rank, addr, nb = np.repeat(rank, span), np.repeat(addr, span), np.repeat(nb, span)
+            nb = np.minimum(addr + nb, (seg + 1) * S) - np.maximum(addr, seg * S)
+        # one request per (instruction, segment); lanes in address order (the common case) need no sort
+        key = (rank << 36) | seg
+        if len(key) > 1 and not (key[1:] >= key[:-1]).all():
+            order = np.argsort(key, kind="stable")
+            key = key[order]
+            if not np.isscalar(nb):
+                nb = nb[order]
+        starts = run_starts(key)
+        touched = (np.add.reduceat(nb, starts) if not np.isscalar(nb)
+                   else np.diff(np.append(starts, len(key))) * nb)
+        req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(S, SECTOR))
+        key = key[starts]
+        seg_addr = (key & ((1 << 36) - 1)) * S
+        out.append(Requests(key >> 36, wis, interleave(seg_addr, memory.interleave_bytes, memory.partitions),
+                            seg_addr, req_bytes))
+        lo = hi
+    return out
+
+
+def memory_bytes(program, gpu) -> np.ndarray:
+    """The bytes each pass of ``program`` brings to each memory partition, (passes, partitions): the coalesced
+    requests of the core's memory instructions; where they take the memory path, the ROPs' framebuffer reads
+    and writes (each sector twice); where ``atomic.dram_rmw`` is set, the atomic units' sector read and write
+    per operation. A sampled program's "memory" occupancy is the whole run's over its own
+    (gpusim.hw.sample)."""
+    from gpusim.hw.atomic import DRAM_RMW_BYTES
+    from gpusim.hw.rop import framebuffer_traffic
+    mem = gpu.memory
+    P, n = mem.partitions, len(program.passes)
+    out = np.zeros(n * P)
+    for unit, times in (("coalescer", 1), ("rop", 2 if framebuffer_traffic(gpu) else 0)):
+        wis, counts, _ = program.storage(unit)
+        if not times or not len(wis):
+            continue
+        for q in unit_requests(program, unit, wis, counts, mem, gpu.coalescer.segment_bytes):
+            out += times * np.bincount(program.wi_pass[q.wi] * P + q.partition, weights=q.nbytes, minlength=n * P)
+    if gpu.atomic.dram_rmw:
+        rows = program.rows_of("atomic")
+        if len(rows):
+            _, _, wi = program.storage("atomic")
+            part = interleave(rows.address, mem.interleave_bytes, P)
+            out += DRAM_RMW_BYTES * np.bincount(program.wi_pass[wi] * P + part, minlength=n * P)
+    return out.reshape(n, P)
+
+
 @dataclass(frozen=True)
 class CoalescerConfig:
     """Coalescing of a warp's accesses into requests."""
@@ -85,7 +162,7 @@ class Coalescer(MemoryLevel):
         self._rmw = np.isin(prog.wi_op, [OPS.index(o) for o in RMW_OPS]).tolist()
         if any(self._rmw):
             self.rmw_starts = {}
-        chunks = self._unit_requests(self.name, wis, counts) if len(wis) else []
+        chunks = unit_requests(prog, self.name, wis, counts, mem, self.segment) if len(wis) else []
         P = self.instances
         if chunks:
             self.requests = sum(np.bincount(q.partition, minlength=P) for q in chunks).tolist()
@@ -96,66 +173,17 @@ class Coalescer(MemoryLevel):
         if len(rop_wis):
             order = np.concatenate([wis, rop_wis])
             chunks = [dataclasses.replace(q, order=order) for q in chunks]
-            for q in self._unit_requests("rop", rop_wis, rop_counts):
+            for q in unit_requests(prog, "rop", rop_wis, rop_counts, mem, self.segment):
                 # a read of each sector, then its write (the blend, test or program's result)
                 chunks.append(Requests(np.repeat(q.rank + len(wis), 2), order, np.repeat(q.partition, 2),
                                        np.repeat(q.address, 2), np.repeat(q.nbytes, 2)))
         if chunks:
             self.next.prepare(chunks, write)
 
-    def _unit_requests(self, unit: str, wis: np.ndarray, counts: np.ndarray) -> list[Requests]:
-        """Coalesced requests of ``unit``'s rows (its instructions ``wis`` in row-storage order, with ``counts``
-        rows each): part by part (arrays the allocator reuses), or all rows at once when there are many small
-        parts (a k-buffer batch run: thousands), where numpy's per-call cost would dominate."""
-        R = self.program.rows_of(unit)
-        los = self.program.row_lo[wis]
-        parts = (zip(R.parts, R.offsets()) if len(R.parts) <= 64
-                 else [((None, R.address, R.nbytes, None), 0)])
-        return [q for part, off in parts for q in self._requests(part, off, los, counts, wis)]
-
     def framebuffer(self, wi: int, arrive_fp: int) -> int:
         """A ROP instruction's framebuffer requests (reads and writes of the sectors its operations touch),
         arriving at the next level at sub-cycle ``arrive_fp``: the cycle the last is served."""
         return self._access(wi, arrive_fp, None)
-
-    def _requests(self, part, off: int, los: np.ndarray, counts: np.ndarray, wis: np.ndarray,
-                  chunk: int = 1 << 20) -> list[Requests]:
-        """Coalesced requests of one part of the rows, a chunk of whole instructions at a time (arrays small
-        enough for the allocator to reuse)."""
-        _, address, nbytes, _ = part
-        a, b = np.searchsorted(los, [off, off + len(address)])
-        ends = np.cumsum(counts[a:b])
-        out = []
-        S = self.segment
-        lo = 0
-        while lo < b - a:
-            hi = max(lo + 1, int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + chunk, side="right")))
-            r0, r1 = (ends[lo - 1] if lo else 0), ends[hi - 1]
-            addr = address[r0:r1]
-            nb = max(int(nbytes), 1) if np.isscalar(nbytes) else np.maximum(nbytes[r0:r1], 1)
-            rank = np.repeat(np.arange(a + lo, a + hi), counts[a + lo:a + hi])
-            span, seg = touched_segments(addr, nb, S)
-            if span is not None:                     # an access wider than a segment touches several
-                nb = np.broadcast_to(nb, addr.shape)
-                rank, addr, nb = np.repeat(rank, span), np.repeat(addr, span), np.repeat(nb, span)
-                nb = np.minimum(addr + nb, (seg + 1) * S) - np.maximum(addr, seg * S)
-            # one request per (instruction, segment); lanes in address order (the common case) need no sort
-            key = (rank << 36) | seg
-            if len(key) > 1 and not (key[1:] >= key[:-1]).all():
-                order = np.argsort(key, kind="stable")
-                key = key[order]
-                if not np.isscalar(nb):
-                    nb = nb[order]
-            starts = run_starts(key)
-            touched = (np.add.reduceat(nb, starts) if not np.isscalar(nb)
-                       else np.diff(np.append(starts, len(key))) * nb)
-            req_bytes = np.minimum(div(touched + SECTOR - 1, SECTOR) * SECTOR, max(S, SECTOR))
-            key = key[starts]
-            seg_addr = (key & ((1 << 36) - 1)) * S
-            out.append(Requests(key >> 36, wis, interleave(seg_addr, self.interleave, self.instances), seg_addr,
-                                req_bytes))
-            lo = hi
-        return out
 
     def serve(self, wi: int, now: int) -> int:
         """Instruction ``wi`` issued at cycle ``now``: the cycle its last request is back at the core."""

@@ -92,7 +92,7 @@ class DramChannel(MemoryLevel):
         for j in range(self._lo[wi], self._hi[wi]):
             p = part[j]
             if pool is not None:                # the partition's share of the rest of the GPU's requests first
-                e = pool.start(k, p, free[p], arrive_fp, extra[j])
+                e = pool.start(k, p, free[p], arrive_fp, extra[j], cost[j])
             else:
                 e = free[p] if free[p] > arrive_fp else arrive_fp
             if starts is not None:
@@ -109,7 +109,7 @@ class DramChannel(MemoryLevel):
         of the rest of the GPU's (gpusim.hw.background). The sub-cycle it starts."""
         free = self.free
         if self.pool is not None:
-            start = self.pool.start(self.wi_pass[wi], p, free[p], at_fp, extra_fp)
+            start = self.pool.start(self.wi_pass[wi], p, free[p], at_fp, extra_fp, cost_fp)
         else:
             start = free[p] if free[p] > at_fp else at_fp
         free[p] = start + cost_fp
