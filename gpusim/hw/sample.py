@@ -470,18 +470,44 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=
     return machine, *thinned(program, gpu, mine)
 
 
+def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, program: Program | None = None
+                ) -> np.ndarray | None:
+    """The run's coalesced memory traffic (:func:`memory_bytes`, (passes, partitions)) in those of its passes
+    ``passes`` (all by default) whose fragment threads a replicate packs into warps of its own (the graphics
+    pipeline's fragment shaders, ``thread_mapping`` "fragment"); NaN in the others, whose samples keep the
+    run's warps (a software rasterizer's triangle blocks, threads that fill warps in order) and coalesce as it
+    does. From ``program``, the run's (or those passes') lowering where it is at hand (the L2's warming), else
+    by lowering each stretch of such passes. None where there are none."""
+    first, end = passes if passes is not None else (0, len(work.plan.passes))
+    fragment = np.array([thread_mapping(gpu, pk) == "fragment" for pk in work.plan.passes[first:end]], bool)
+    if not fragment.any():
+        return None
+    out = np.full((end - first, gpu.memory.partitions), np.nan)
+    if program is not None:
+        out[fragment] = memory_bytes(program, gpu)[fragment]
+        return out
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], fragment.astype(np.int8), [0]))))
+    for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):      # each stretch [a, b) of fragment passes
+        out[a:b] = memory_bytes(lower(work, gpu, passes=(first + a, first + b)), gpu)
+    return out
+
+
 def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
     """A sample's ``program`` on ``gpu`` whose memory partitions are as busy as the run's coalesced traffic makes
-    them, ``run_bytes`` (passes, partitions: :func:`memory_bytes` of the whole run): the "memory" occupancy the
-    run's bytes over the sample's own coalesced bytes (at least 1), and the sample's own load those bytes. A
-    replicate packs into a warp the fragments of tiles that lie far apart, so its warps coalesce worse than the
-    run's; scaled by the operations' bytes, its DRAM was up to 8% busier than the run's."""
+    them in the passes ``run_bytes`` gives (:func:`run_traffic`; NaN rows: passes left as they are): there the
+    "memory" occupancy is the run's bytes over the sample's own coalesced bytes (at least 1), and the sample's
+    own load those bytes. A replicate packs into a warp the fragments of tiles that lie far apart, so its warps
+    coalesce worse than the run's; scaled by the operations' bytes, its DRAM was up to 8% busier than the
+    run's."""
     if program.occupancy is None or "memory" not in program.occupancy:
         return program
     mine = memory_bytes(program, gpu)
-    factor = np.where(mine > 0, np.maximum(run_bytes / np.maximum(mine, 1e-9), 1.0), 1.0)
+    known = ~np.isnan(run_bytes)
+    factor = np.where(known & (mine > 0), np.maximum(np.where(known, run_bytes, 0.0) / np.maximum(mine, 1e-9), 1.0),
+                      np.where(known, 1.0, program.occupancy["memory"]))
+    own = np.where(known, mine, program.own_load["memory"])
     return dataclasses.replace(program, occupancy=program.occupancy | {"memory": factor},
-                               own_load=(program.own_load or {}) | {"memory": mine})
+                               own_load=program.own_load | {"memory": own})
 
 
 def thinned(program: Program, gpu, sms: int) -> tuple[Program, np.ndarray]:
@@ -642,12 +668,11 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     pieces = outcomes = run_bytes = None
     if chunks is None:
         pieces, _ = _pieces(work, gpu, reps, None)
-        warm = gpu.l2.size_bytes and "l2" in gpu.memory.levels
-        if share < 1 and (warm or gpu.sample.run_traffic):   # the run's coalesced traffic; on an L2 its outcomes
-            run = lower(work, gpu)
-            run_bytes = memory_bytes(run, gpu) if gpu.sample.run_traffic else None
-            outcomes = Outcomes(run, gpu) if warm else None
-            del run
+        warm = share < 1 and gpu.l2.size_bytes and "l2" in gpu.memory.levels
+        run = lower(work, gpu) if warm else None                  # the run's L2 outcomes (warming)
+        outcomes = Outcomes(run, gpu) if warm else None
+        run_bytes = run_traffic(work, gpu, None, run) if share < 1 and gpu.sample.run_traffic else None
+        del run
     count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
     # (sample, fewest SMs): the replicates; where they are thinned, the work checks (pairs of replicates' samples
     # together on the same SMs: twice the work); the scale check (replicates 0 and 1 on their SMs together)
@@ -687,8 +712,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
             pieces, _ = _pieces(work, gpu, reps, (first, end))
-            run_bytes = (memory_bytes(lower(work, gpu, passes=(first, end)), gpu)
-                         if reps.share < 1 and gpu.sample.run_traffic else None)
+            run_bytes = run_traffic(work, gpu, (first, end)) if reps.share < 1 and gpu.sample.run_traffic else None
             for i, (r, _) in enumerate(members):
                 machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
                                                              sms=fit[i], run_bytes=run_bytes)
