@@ -395,8 +395,8 @@ def test_a_triangle_sample_finds_the_lines_other_triangles_brought_in(spheres):
 def test_the_heaviest_warp_of_a_pass_is_in_every_replicate(spheres):
     # LucidRaster's raster passes run a warp per bin, a few warps per SM: the pass ends with its heaviest warp.
     # Ranked by their operations, that warp is in every replicate and the others in one at most; the sampled
-    # cycles then come within 4% of the full level's (3.3% short here, 1.7% before the DRAM channels pooled the
-    # rest of the GPU's requests without the wait of its random arrivals, docs/timing-model.md; 10.2% short
+    # cycles then come within 3% of the full level's (2.5% short here; 3.3% when the DRAM channels' pool left
+    # out the wait among the rest of the GPU's requests arriving at random, docs/timing-model.md; 10.2% short
     # when warps were ranked by position, none certain)
     gpu = load_gpu("gtx280", ["runner.workers=1", "sample.min_tiles=1"])
     result, _, _ = run_functional(spheres, "lucidraster", {})
@@ -412,7 +412,7 @@ def test_the_heaviest_warp_of_a_pass_is_in_every_replicate(spheres):
     assert (np.delete(overlap, ops.argmax()) <= 1).all()
     full = replay(spheres, "lucidraster", {}, "full", gpu)[1]["timing"]
     sampled = replay(spheres, "lucidraster", {}, "sampled", gpu)[1]["timing"]
-    assert sampled["cycles"] == pytest.approx(full["cycles"], rel=0.04)
+    assert sampled["cycles"] == pytest.approx(full["cycles"], rel=0.03)
 
 
 def test_a_small_run_samples_at_least_min_tiles_and_the_smallest_is_the_run(spheres):
