@@ -11,7 +11,8 @@ import pytest
 
 from gpusim.hw import load_gpu
 from gpusim.hw.lower import Workload, lower, plan_pieces
-from gpusim.hw.sample import Keep, Replicates, sampled_sms, scaled_gpu, t_quantile
+from gpusim.hw.memory.coalescer import memory_bytes
+from gpusim.hw.sample import Keep, Replicates, run_traffic, sampled_sms, scaled_gpu, t_quantile
 from gpusim.replay import replay, run_functional
 from gpusim.scene import load_scene, trace_scene
 
@@ -474,3 +475,23 @@ def test_pieces_of_the_candidate_rows_lower_the_same_samples(scheme, params):
             assert np.array_equal(a.hold_scale, b.hold_scale)
         for unit, rows in a.row_sets.items():
             assert np.array_equal(rows.address, b.row_sets[unit].address), unit
+
+
+def test_the_runs_traffic_is_taken_in_the_fragment_shader_passes_only(spheres):
+    # TFSS: a clear, the capture (the graphics pipeline's fragment shader: a replicate packs far-apart tiles'
+    # fragments into its warps) and the read (pixel threads in the run's own warps)
+    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    work = Workload.of(run_functional(spheres, "tfss", {})[0], spheres)
+    names = [pk.name for pk in work.plan.passes]
+    got = run_traffic(work, gpu)
+    whole = memory_bytes(lower(work, gpu), gpu)
+    capture = names.index("capture")
+    assert np.array_equal(got[capture], whole[capture]) and whole[capture].sum() > 0
+    others = [p for p in range(len(names)) if p != capture]
+    assert np.isnan(got[others]).all()
+    # from a lowering at hand (an L2's warming) the same figures; the chunk of passes from the capture on
+    assert np.array_equal(run_traffic(work, gpu, None, lower(work, gpu)), got, equal_nan=True)
+    assert np.array_equal(run_traffic(work, gpu, (capture, len(names))), got[capture:], equal_nan=True)
+    # a software rasterizer keeps the run's warps in every pass: nothing to lower
+    mdts = Workload.of(run_functional(spheres, "freepipe-mdts", {})[0], spheres)
+    assert run_traffic(mdts, gpu) is None

@@ -86,7 +86,7 @@ class SampleConfig:
                               "a GPU with an L2 it lowers the whole run anyway, to warm it): a replicate packs "
                               "fragments of tiles far apart into its warps, which coalesce worse than the run's; "
                               "off, a replicate's traffic is scaled by its operations' bytes, quicker (the run's "
-                              "lowering took about as long as the replicates on TFSS) but up to 7% over on the "
+                              "lowering took half as long as the replicates on TFSS) but up to 7% over on the "
                               "fidelity-speed case")
 
 

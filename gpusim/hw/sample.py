@@ -503,8 +503,8 @@ def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
         return program
     mine = memory_bytes(program, gpu)
     known = ~np.isnan(run_bytes)
-    factor = np.where(known & (mine > 0), np.maximum(np.where(known, run_bytes, 0.0) / np.maximum(mine, 1e-9), 1.0),
-                      np.where(known, 1.0, program.occupancy["memory"]))
+    ratio = np.where(mine > 0, np.maximum(np.nan_to_num(run_bytes) / np.maximum(mine, 1e-9), 1.0), 1.0)
+    factor = np.where(known, ratio, program.occupancy["memory"])
     own = np.where(known, mine, program.own_load["memory"])
     return dataclasses.replace(program, occupancy=program.occupancy | {"memory": factor},
                                own_load=program.own_load | {"memory": own})
