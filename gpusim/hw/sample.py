@@ -93,7 +93,7 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import (Census, Workload, lower, pass_operations, plan_pieces, sample_masks,
+from gpusim.hw.lower import (Census, Pieces, Workload, lower, pass_operations, plan_pieces, sample_masks,
                              share_pieces, split_by, thread_mapping)
 from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.memory.warming import Outcomes
@@ -257,8 +257,9 @@ class Replicates:
         self.info = {"tiles": occupied, "tiles_per_replicate": int(self.tiles[0].sum()),
                      "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
 
-    def candidate_rows(self, pass_of, threads: np.ndarray, lane: np.ndarray) -> np.ndarray | None:
-        """Of operations in passes ``pass_of`` (one for all, or one per operation) of ``threads[lane]``, those
+    def candidate_rows(self, pass_of, threads: np.ndarray, lane: np.ndarray | None = None) -> np.ndarray | None:
+        """Of operations in passes ``pass_of`` (one for all, or one per operation) of ``threads[lane]`` (of
+        ``threads`` where ``lane`` is None), those
         some replicate may keep (:func:`gpusim.hw.lower.plan_pieces`' ``keep_rows``): a fragment thread's in a
         tile, a triangle thread's in a triangle block, that a replicate holds; every one of a pass whose
         threads fill warps in order (its warps are chosen from all of them). None: all of them. Each pass's
@@ -277,15 +278,16 @@ class Replicates:
         codes = self.codes[lo:hi]
         if (codes == 0).all():                     # warps of the pass's threads: all of them
             return None
+        rows_threads = threads if lane is None else threads[lane]
         if (codes == codes[0]).all():              # one mapping for every row: decided per thread
-            held = self.held[int(codes[0])][threads][lane]
+            held = self.held[int(codes[0])][rows_threads]
         else:
             code = self.codes[pass_of]
-            held = np.full(len(lane), -1, np.int64)
+            held = np.full(len(rows_threads), -1, np.int64)
             for c in (1, 2):
                 rows = np.flatnonzero(code == c)
                 if len(rows):
-                    held[rows] = self.held[c][threads[lane[rows]]]
+                    held[rows] = self.held[c][rows_threads[rows]]
         if np.isscalar(pass_of):
             self.seen[lo] |= int(np.bitwise_or.reduce(held[held > 0])) if len(held) else 0
         else:                                     # each pass's combinations of holders, then their union
@@ -470,14 +472,15 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=
     return machine, *thinned(program, gpu, mine)
 
 
-def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, program: Program | None = None
-                ) -> np.ndarray | None:
+def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, program: Program | None = None,
+                pieces: list | None = None) -> np.ndarray | None:
     """The run's coalesced memory traffic (:func:`memory_bytes`, (passes, partitions)) in those of its passes
     ``passes`` (all by default) whose fragment threads a replicate packs into warps of its own (the graphics
     pipeline's fragment shaders, ``thread_mapping`` "fragment"); NaN in the others, whose samples keep the
     run's warps (a software rasterizer's triangle blocks, threads that fill warps in order) and coalesce as it
     does. From ``program``, the run's (or those passes') lowering where it is at hand (the L2's warming), else
-    by lowering each stretch of such passes. None where there are none."""
+    by lowering each stretch of such passes, from ``pieces`` (:func:`plan_pieces` of ``passes``) where they are
+    at hand. None where there are none."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     fragment = np.array([thread_mapping(gpu, pk) == "fragment" for pk in work.plan.passes[first:end]], bool)
     if not fragment.any():
@@ -488,7 +491,9 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
         return out
     edges = np.flatnonzero(np.diff(np.concatenate(([0], fragment.astype(np.int8), [0]))))
     for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):      # each stretch [a, b) of fragment passes
-        out[a:b] = memory_bytes(lower(work, gpu, passes=(first + a, first + b)), gpu)
+        mine = None if pieces is None else Pieces(dataclasses.replace(pc, pass_index=pc.pass_index - a)
+                                                  for pc in pieces if a <= pc.pass_index < b)
+        out[a:b] = memory_bytes(lower(work, gpu, passes=(first + a, first + b), pieces=mine), gpu)
     return out
 
 
@@ -584,31 +589,55 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
 
 
 def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None):
-    """:func:`gpusim.hw.lower.plan_pieces` of the run (of its passes ``passes``) for its replicates: only the rows
-    some replicate may keep (:meth:`Replicates.candidate_rows`), every operation counted in a census; all of
-    them, and no census, where a replicate is the run."""
+    """:func:`gpusim.hw.lower.plan_pieces` of the run (of its passes ``passes``) for its replicates: (only the rows
+    some replicate may keep (:meth:`Replicates.candidate_rows`), a census of every operation, the pieces of every
+    row); the pieces of every row twice, and no census, where a replicate is the run. The run's pieces are made
+    once, for the census, the candidates and the run's own lowering (its traffic, the L2's warming)."""
+    every = plan_pieces(work, passes)
     if reps.share >= 1:
-        return plan_pieces(work, passes), None
+        return every, None, every
+    first = passes[0] if passes is not None else 0
     census = Census(work.plan, gpu, passes)
-    return _candidate_pieces(work, reps, passes, census), census
+    for pc in every:
+        if pc.instructions is None:
+            census.add(work.plan.groups[pc.group].op, pc.pass_index + first, pc.address, pc.nbytes)
+    return _candidate_pieces(work, reps, passes, census, every), census, every
 
 
-def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, census: Census | None):
+def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, census: Census | None,
+                      every: list | None = None):
     """The pieces of the rows some replicate may keep (:meth:`Replicates.candidate_rows`), and every row of a
     graphics or software-rasterizer pass in which a replicate holds none: :class:`Keep` gives that replicate
-    one unit of the pass's, drawn from all of its rows (as from the pieces of every row)."""
+    one unit of the pass's, drawn from all of its rows (as from the pieces of every row). Taken from ``every``,
+    the pieces of every row, where they are at hand (a replicate keeps or leaves a thread whole, so a kept row's
+    iteration is the one it has there), else made for those rows alone."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     reps.seen[first:end] = 0
-    pieces = plan_pieces(work, passes, reps.candidate_rows, census)
+    if every is None:
+        pieces = plan_pieces(work, passes, reps.candidate_rows, census)
+    else:
+        pieces = Pieces()
+        for pc in every:
+            m = reps.candidate_rows(pc.pass_index + first, pc.thread)
+            if m is None or m.all():
+                pieces.append(pc)
+            elif m.any():
+                pieces.append(pc.take(np.flatnonzero(m)))
+        pieces.census = census
+        pieces.totals = pass_operations(work.plan)[first:end]
     rows = pass_operations(work.plan)[first:end] > 0
-    every = (1 << reps.count) - 1
-    short = np.flatnonzero(rows & (reps.codes[first:end] != 0) & (reps.seen[first:end] != every)) + first
+    held_by_all = (1 << reps.count) - 1
+    short = np.flatnonzero(rows & (reps.codes[first:end] != 0) & (reps.seen[first:end] != held_by_all)) + first
     if not len(short):
         return pieces
     whole = np.zeros(len(work.plan.passes), bool)
     whole[short] = True
-    extra = plan_pieces(work, passes, lambda pass_of, threads, lane: (
-        None if np.isscalar(pass_of) and whole[int(pass_of)] else np.broadcast_to(whole[pass_of], np.shape(lane))))
+    if every is None:
+        extra = plan_pieces(work, passes, lambda pass_of, threads, lane: (
+            None if np.isscalar(pass_of) and whole[int(pass_of)]
+            else np.broadcast_to(whole[pass_of], np.shape(lane))))
+    else:
+        extra = [pc for pc in every if whole[pc.pass_index + first]]
     merged = sorted([pc for pc in pieces if not whole[pc.pass_index + first]] + list(extra),
                     key=lambda pc: (pc.group, pc.pass_index))
     out = type(pieces)(merged)
@@ -667,12 +696,13 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     rmw_all = rmw_threads(work.plan, work)
     pieces = outcomes = run_bytes = None
     if chunks is None:
-        pieces, _ = _pieces(work, gpu, reps, None)
+        pieces, _, every = _pieces(work, gpu, reps, None)
         warm = share < 1 and gpu.l2.size_bytes and "l2" in gpu.memory.levels
-        run = lower(work, gpu) if warm else None                  # the run's L2 outcomes (warming)
+        run = lower(work, gpu, pieces=every) if warm else None    # the run's L2 outcomes (warming)
         outcomes = Outcomes(run, gpu) if warm else None
-        run_bytes = run_traffic(work, gpu, None, run) if share < 1 and gpu.sample.run_traffic else None
-        del run
+        run_bytes = (run_traffic(work, gpu, None, run, every) if share < 1 and gpu.sample.run_traffic
+                     else None)
+        del run, every
     count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
     # (sample, fewest SMs): the replicates; where they are thinned, the work checks (pairs of replicates' samples
     # together on the same SMs: twice the work); the scale check (replicates 0 and 1 on their SMs together)
@@ -711,8 +741,10 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         readers: list[list] = [[] for _ in members]
         thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
-            pieces, _ = _pieces(work, gpu, reps, (first, end))
-            run_bytes = run_traffic(work, gpu, (first, end)) if reps.share < 1 and gpu.sample.run_traffic else None
+            pieces, _, every = _pieces(work, gpu, reps, (first, end))
+            run_bytes = (run_traffic(work, gpu, (first, end), pieces=every)
+                         if reps.share < 1 and gpu.sample.run_traffic else None)
+            del every
             for i, (r, _) in enumerate(members):
                 machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
                                                              sms=fit[i], run_bytes=run_bytes)
