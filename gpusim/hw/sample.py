@@ -614,6 +614,7 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     addresses, to count what each sample keeps)."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     reps.seen[first:end] = 0
+    totals = pass_operations(work.plan)[first:end]
     if every is None:
         pieces = plan_pieces(work, passes, reps.candidate_rows, census, addresses)
     else:
@@ -624,11 +625,12 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
                 pieces.append(pc)
             elif m.any():
                 pieces.append(pc.take(np.flatnonzero(m)))
-        pieces.census = census
-        pieces.totals = pass_operations(work.plan)[first:end]
-    rows = pass_operations(work.plan)[first:end] > 0
+        pieces.census, pieces.totals = census, totals
+    if reps.codes is None:                        # no operation asked about: nothing to keep
+        return pieces
     held_by_all = (1 << reps.count) - 1
-    short = np.flatnonzero(rows & (reps.codes[first:end] != 0) & (reps.seen[first:end] != held_by_all)) + first
+    short = np.flatnonzero((totals > 0) & (reps.codes[first:end] != 0) & (reps.seen[first:end] != held_by_all))
+    short += first
     if not len(short):
         return pieces
     whole = np.zeros(len(work.plan.passes), bool)
