@@ -155,7 +155,17 @@ def test_a_replicate_is_thinned_only_where_it_keeps_enough_tiles():
     assert thinning(gpu, 1000, 1) == pytest.approx(16 / (1000 / 30))      # raised to keep 16 tiles: 0.48
     assert thinning(gpu, 900, 1) == 1.0                  # 0.53: over 0.5, the work check would cost the gain
     assert thinning(gpu, 2304, 30) == 1.0                # the replicate is the run
-    assert thinning(load_gpu("gtx280"), 2304, 1) == 1.0   # off by default
+    assert thinning(load_gpu("gtx280"), 2304, 1) == 0.25  # on by default
+    assert thinning(load_gpu("gtx280", ["sample.thin=1"]), 2304, 1) == 1.0   # off
+
+
+def test_the_intervals_degrees_of_freedom_count_the_work_checks_slope():
+    # Welch-Satterthwaite: standard errors 3 (3 degrees of freedom) and 4 (1): (9 + 16)^2 / (81 / 3 + 256) =
+    # 625 / 283 = 2.2, rounded down to 2; either alone keeps its own
+    from gpusim.hw.sample import welch_dof
+    assert welch_dof(3.0, 3, 4.0, 1) == 2
+    assert welch_dof(3.0, 3, 0.0, 1) == 3 and welch_dof(0.0, 3, 4.0, 1) == 1
+    assert welch_dof(1.0, 3, 100.0, 1) == 1                # the slope's doubt dominates: t(0.975, 1) = 12.7
 
 
 def test_the_work_check_extrapolates_each_pass_linearly_to_the_whole_work():

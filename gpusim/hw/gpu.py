@@ -69,11 +69,12 @@ class SampleConfig:
                            "with fewer than this many / fraction samples a larger share, on as many more SMs (all of "
                            "them, the run itself, for a run of at most replicates x this many tiles, where the "
                            "replicates would cost as much as the run)", min=1)
-    thin: float = param(1.0, unit="1", doc="share of its SMs' work a replicate keeps where the run has enough "
+    thin: float = param(0.25, unit="1", doc="share of its SMs' work a replicate keeps where the run has enough "
                         "tiles (at least thin_min_tiles a replicate): the replicate then stands for the GPU on a "
                         "frame thinned to that share, and the work checks (replicates 0 and 1, and 2 and 3, together "
                         "on the same SMs, twice the share) extrapolate each pass's cycles linearly to the whole "
-                        "work; shares over 0.5 thin nothing; 1 (the default): off", gt=0, max=1)
+                        "work, the interval's degrees of freedom counting their slope's one (Welch-Satterthwaite); "
+                        "shares over 0.5 thin nothing; 1: off", gt=0, max=1)
     thin_min_tiles: int = param(16, unit="tiles", doc="screen tiles with fragments a thinned replicate keeps at "
                                 "least: the share it keeps is raised to keep them", min=1)
     seed: int = param(1, doc="random seed of the samples", min=0)

@@ -167,6 +167,15 @@ def thinning(gpu, tiles: int, sms: int) -> float:
     return theta if theta <= 0.5 else 1.0
 
 
+def welch_dof(a: float, dof_a: int, b: float, dof_b: int) -> int:
+    """Degrees of freedom of the standard error ``hypot(a, b)`` of a sum of two independent estimates whose own
+    standard errors ``a`` and ``b`` come with ``dof_a`` and ``dof_b`` degrees of freedom (Welch-Satterthwaite),
+    rounded down (the wider interval); the other's where one of them is 0."""
+    if b <= 0 or a <= 0:
+        return dof_a if b <= 0 else dof_b
+    return max(1, int((a * a + b * b) ** 2 / (a ** 4 / dof_a + b ** 4 / dof_b)))
+
+
 def replicate_sms(gpu, program: Program, floor: int) -> int:
     """SMs for a replicate whose lowered ``program`` keeps a share of the run's operations: that share of the
     GPU's SMs, at least ``floor`` (a sample that keeps more of the work than its share of the tiles, as one
@@ -779,8 +788,10 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         check_run = ({"cycles": np.array(rec_u["cycles"]) + slope * (1 - np.array(rec_u["theta"]))}, sms_u)
     totals = per_pass.sum(axis=1)
     mean = float(totals.mean())
-    se = math.hypot(float(totals.std(ddof=1) / math.sqrt(n)), slope_se)
-    t = t_quantile(0.975, n - 1)
+    spread = float(totals.std(ddof=1) / math.sqrt(n))
+    se = math.hypot(spread, slope_se)
+    # the work checks' slope comes from two slopes (one degree of freedom): where it weighs, so does its doubt
+    t = t_quantile(0.975, welch_dof(spread, n - 1, slope_se, 1))
     warps = np.mean([run["warps"] for run in runs], axis=0)
     passes = [{"name": p.name, "kind": p.kind, "cycles": int(round(c)), "warps": int(round(wp)),
                "replicate_cycles": [int(x) for x in per_pass[:, i]]}
