@@ -60,13 +60,14 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   (``sample.scale_check``) runs replicates 0 and 1's samples together on their
   SMs together and takes the growth of a pass's end with the SMs from it
   (:func:`scale_check`): the bias ``b``. The 95% confidence interval is
-  ``mean +- (t(0.975, R - 1) x SE + |b|)`` (``cycles_ci95_low``,
-  ``cycles_ci95_high``) and ``cycle_error_estimate = hypot(SE, b) / mean``;
-  the estimate itself is not corrected by ``b`` (on the fidelity corpus the
-  correction's sign was right in 71% of cases, and the corrected figures were
-  no closer). The corpus (configs/experiments/fidelity.toml) measures how
+  ``mean +- (t(0.975, nu) x SE + |b|)`` (``cycles_ci95_low``,
+  ``cycles_ci95_high``; ``nu = R - 1``, or with thinning the
+  Welch-Satterthwaite degrees of freedom of the spread and the work checks'
+  slope, :func:`welch_dof`) and ``cycle_error_estimate = hypot(SE, b) / mean``;
+  the estimate itself is not corrected by ``b`` (on the fidelity corpus it
+  overshoots the error, and the corrected figures were further off). The corpus (configs/experiments/fidelity.toml) measures how
   often the interval holds the full level's cycles.
-* Thinning (``sample.thin`` below 1, off by default). A replicate keeps only
+* Thinning (``sample.thin`` below 1; 0.25 by default). A replicate keeps only
   that share of its SMs' share of the tiles (:func:`thinning`) and stands for
   the whole GPU on a frame thinned to it (:func:`thinned`: the rest of the GPU's
   load on the shared units, the atomic chains and the front end at the share
@@ -74,7 +75,8 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   and the work checks (replicates 0 and 1's samples together on the same SMs,
   twice the share, and 2 and 3's) give each pass's slope, by which every
   replicate's pass (and the scale check's) is extrapolated to the whole work
-  (:func:`work_check`).
+  (:func:`work_check`); the slope's standard error joins the replicates' in
+  ``SE``, with its one degree of freedom.
 * Hazards, requests and busy cycles: each replicate's over the share of the
   work it kept (RMW fragments for hazards, operations for the units), averaged.
 
