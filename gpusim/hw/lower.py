@@ -199,11 +199,11 @@ def ops_in_passes(g, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None, keep_rows=None,
-                  census: "Census | None" = None, addresses: bool = True) -> list[_Piece]:
+                  addresses: bool = True) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes; only those of passes
     ``passes[0]`` to ``passes[1] - 1`` when given, and of those only the rows ``keep_rows(pass, threads,
-    lane)`` keeps (a mask, or None for all), every row counted in ``census`` first (see :func:`plan_pieces`).
-    ``addresses`` false: rows without their addresses (zeros) and bytes (0), to be counted only."""
+    lane)`` keeps (a mask, or None for all) (see :func:`plan_pieces`). ``addresses`` false: rows without
+    their addresses (zeros) and bytes (0), to be counted only."""
     n = len(g.thread)
     threads = g.thread_ids()
     i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
@@ -217,8 +217,6 @@ def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | N
     else:
         addr, nbytes = np.broadcast_to(np.int64(0), (len(i),)), 0
     pass_of = g.pass_of(i, seq)
-    if census is not None and not g.is_compute:
-        census.add(g.op, pass_of, addr, nbytes)
     rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
     if rows is not None and not rows.all():
         sel = np.flatnonzero(rows)
@@ -307,23 +305,19 @@ def _run_words(pieces: list[_Piece], plan: OpPlan) -> tuple[np.ndarray, np.ndarr
 
 
 def plan_pieces(work: Workload, passes: tuple[int, int] | None = None, keep_rows=None,
-                census: Census | None = None, addresses: bool = True) -> Pieces:
+                addresses: bool = True) -> Pieces:
     """The rows of each group in each pass (of ``passes``, numbered from its first), before lanes are known;
     :func:`lower` takes them (``pieces``) when it lowers several samples of one run. ``keep_rows(pass,
     threads, lane)`` (each row's pass, or one for all; a group's threads; each row's index into them): the
-    rows to keep (the sampled level's: those some sample may keep), a mask or None for all;
-    then every operation is counted in ``census`` (made for the same ``passes``), which the samples'
-    lowering reads for the whole run's loads and atomic words. ``addresses`` false (no census): rows whose
+    rows to keep (the sampled level's: those some sample may keep), a mask or None for all; the pieces
+    then hold ``totals``, the run's memory operations in each pass. ``addresses`` false: rows whose
     addresses and bytes are left out, for counting what a sample keeps (they cannot be lowered)."""
-    if census is not None and not addresses:
-        raise ValueError("a census counts the rows' addresses")
     p_first = passes[0] if passes is not None else 0
     pieces = Pieces(pc for gi, g in enumerate(work.plan.groups)
-                    for pc in _group_pieces(gi, g, work.bases, passes, keep_rows, census, addresses))
+                    for pc in _group_pieces(gi, g, work.bases, passes, keep_rows, addresses))
     for pc in pieces:                  # pass numbers of this program
         pc.pass_index -= p_first
     if keep_rows is not None:
-        pieces.census = census
         pieces.totals = pass_operations(work.plan)[p_first:(passes[1] if passes is not None else None)]
     return pieces
 

@@ -612,22 +612,22 @@ def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | Non
     for pc in every:
         if pc.instructions is None:
             census.add(work.plan.groups[pc.group].op, pc.pass_index + first, pc.address, pc.nbytes)
-    return _candidate_pieces(work, reps, passes, census, every), census, every
+    return _candidate_pieces(work, reps, passes, every, census), census, every
 
 
-def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, census: Census | None,
-                      every: list | None = None, addresses: bool = True):
+def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, every: list | None = None,
+                      census: Census | None = None):
     """The pieces of the rows some replicate may keep (:meth:`Replicates.candidate_rows`), and every row of a
     graphics or software-rasterizer pass in which a replicate holds none: :class:`Keep` gives that replicate
     one unit of the pass's, drawn from all of its rows (as from the pieces of every row). Taken from ``every``,
-    the pieces of every row, where they are at hand (a replicate keeps or leaves a thread whole, so a kept row's
-    iteration is the one it has there), else made for those rows alone (``addresses`` false: without their
-    addresses, to count what each sample keeps)."""
+    the pieces of every row (a replicate keeps or leaves a thread whole, so a kept row's iteration is the one it
+    has there), with ``census``, the census of every operation, for the samples' lowering; without ``every``,
+    made for those rows alone without their addresses, to count what each sample keeps."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     reps.seen[first:end] = 0
     totals = pass_operations(work.plan)[first:end]
     if every is None:
-        pieces = plan_pieces(work, passes, reps.candidate_rows, census, addresses)
+        pieces = plan_pieces(work, passes, reps.candidate_rows, addresses=False)
     else:
         pieces = Pieces()
         for pc in every:
@@ -649,7 +649,7 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     if every is None:
         extra = plan_pieces(work, passes, lambda pass_of, threads, lane: (
             None if np.isscalar(pass_of) and whole[int(pass_of)]
-            else np.broadcast_to(whole[pass_of], np.shape(lane))), addresses=addresses)
+            else np.broadcast_to(whole[pass_of], np.shape(lane))), addresses=False)
     else:
         extra = [pc for pc in every if whole[pc.pass_index + first]]
     merged = sorted([pc for pc in pieces if not whole[pc.pass_index + first]] + list(extra),
@@ -666,8 +666,8 @@ def _chunked_sms(work: Workload, gpu, reps: Replicates, members: list, chunks: l
     sample keeps of each chunk's."""
     kept, total = [0] * len(members), 0
     for first, end in chunks:
-        pieces = (_candidate_pieces(work, reps, (first, end), None, addresses=False) if reps.share < 1
-                  else plan_pieces(work, (first, end), addresses=False))      # counted only
+        pieces = (_candidate_pieces(work, reps, (first, end)) if reps.share < 1    # counted only
+                  else plan_pieces(work, (first, end), addresses=False))
         total += int(pieces.totals.sum()) if pieces.totals is not None else sum(pc.operations for pc in pieces)
         for i, (r, _) in enumerate(members):
             masks = sample_masks(pieces, Keep(reps, r), first)
