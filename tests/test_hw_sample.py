@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from gpusim.hw import load_gpu
-from gpusim.hw.lower import Workload, _run_loads, _run_words, lower, plan_pieces
+from gpusim.hw.lower import Workload, _run_loads, _run_words, lower, plan_pieces, submission_warps
 from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.sample import Keep, Replicates, run_traffic, sampled_sms, scaled_gpu, t_quantile
 from gpusim.replay import replay, run_functional
@@ -509,7 +509,7 @@ def test_pieces_of_the_candidate_rows_lower_the_same_samples(scheme, params):
 def test_the_runs_traffic_is_taken_in_the_fragment_shader_passes_only(spheres):
     # TFSS: a clear, the capture (the graphics pipeline's fragment shader: a replicate packs far-apart tiles'
     # fragments into its warps) and the read (pixel threads in the run's own warps)
-    gpu = load_gpu("gtx280", ["runner.workers=1"])
+    gpu = load_gpu("gtx280", ["runner.workers=1", "sample.traffic_share=1"])
     work = Workload.of(run_functional(spheres, "tfss", {})[0], spheres)
     names = [pk.name for pk in work.plan.passes]
     got = run_traffic(work, gpu)
@@ -524,3 +524,31 @@ def test_the_runs_traffic_is_taken_in_the_fragment_shader_passes_only(spheres):
     # a software rasterizer keeps the run's warps in every pass: nothing to lower
     mdts = Workload.of(run_functional(spheres, "freepipe-mdts", {})[0], spheres)
     assert run_traffic(mdts, gpu) is None
+
+
+def test_the_runs_traffic_is_estimated_from_a_sample_of_its_own_warps(spheres, monkeypatch):
+    # one warp at random of every 4 consecutive ones of the capture pass, lowered in the run's warps: each
+    # partition's bytes are theirs times its load over theirs; close to the whole run's, not equal to it
+    import gpusim.hw.sample as sample
+    monkeypatch.setattr(sample, "MIN_TRAFFIC_WARPS", 8)
+    work = Workload.of(run_functional(spheres, "tfss", {})[0], spheres)
+    capture = [pk.name for pk in work.plan.passes].index("capture")
+    whole = run_traffic(work, load_gpu("gtx280", ["runner.workers=1", "sample.traffic_share=1"]))[capture]
+    gpu = load_gpu("gtx280", ["runner.workers=1", "sample.traffic_share=0.25"])
+    got = run_traffic(work, gpu)[capture]
+    assert not np.array_equal(got, whole)
+    assert np.abs(got / whole - 1).max() < 0.05 and abs(got.sum() / whole.sum() - 1) < 0.02
+    # the sample: a quarter of the pass's warps, one of each block of 4, each whole (all of its lanes)
+    pieces = sample.Pieces(pc for pc in plan_pieces(work) if pc.pass_index == capture)
+    for pc in pieces:
+        pc.pass_index = 0
+    kept, warps, scale = sample._traffic_warps(work, gpu, pieces, capture, 1)
+    lanes = np.unique(np.concatenate([pc.thread for pc in pieces]))
+    mine = np.unique(np.concatenate([pc.thread for pc in kept]))
+    run_warp = submission_warps(work, gpu, lanes)[0]
+    chosen = np.unique(run_warp[np.isin(lanes, mine)])
+    assert np.array_equal(np.unique(chosen // 4, return_counts=True)[1], np.ones(len(chosen), int))
+    assert len(chosen) == -(-(int(run_warp[-1]) + 1) // 4) or len(chosen) == (int(run_warp[-1]) + 1) // 4
+    assert np.isin(lanes[np.isin(run_warp, chosen)], mine).all()        # whole warps
+    assert np.array_equal(warps(0, mine), run_warp[np.isin(lanes, mine)] // 4)
+    assert (scale > 1).all()

@@ -89,6 +89,12 @@ class SampleConfig:
                               "off, a replicate's traffic is scaled by its operations' bytes, quicker (the run's "
                               "lowering took half as long as the replicates on TFSS) but up to 7% over on the "
                               "fidelity-speed case")
+    traffic_share: float = param(0.125, unit="1", doc="share of the run's warps the level lowers for its "
+                                 "coalesced traffic (sample.run_traffic) in a fragment-shader pass packed in "
+                                 "submission order: one warp at random of every round(1 / share) consecutive ones, "
+                                 "the run's own warps; the pass's bytes are theirs times its operations over theirs. "
+                                 "A pass of fewer than 256 / share warps, or with a scoreboard, is lowered whole; "
+                                 "1: every pass whole", gt=0, max=1)
 
 
 register_section("runner", RunnerConfig)

@@ -344,7 +344,7 @@ def sample_masks(pieces: list[_Piece], keep, p_first: int = 0) -> list[np.ndarra
 
 
 def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
-          pieces: list[_Piece] | None = None) -> Program:
+          pieces: list[_Piece] | None = None, warps=None) -> Program:
     """Warp instructions of ``work.plan`` on ``gpu``.
 
     ``keep(pass_index, threads) -> masks`` selects threads (the sampled
@@ -356,7 +356,10 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
     only the plan's passes ``passes[0]`` to ``passes[1] - 1``, as a program of
     their own (its pass 0 is the plan's ``passes[0]``); their instructions are
     those the whole program gives them. ``pieces``: :func:`plan_pieces` of the
-    same ``work`` and ``passes``, made once for several samples.
+    same ``work`` and ``passes``, made once for several samples. ``warps(pass_index, lane_keys)``: in a
+    graphics-pipeline fragment pass packed in submission order, each lane's warp (numbered from 0, ascending)
+    where the pieces keep whole warps of the run's (:func:`gpusim.hw.sample.run_traffic`), or None to pack
+    the lanes as they are.
     """
     plan = work.plan
     p_first, p_end = passes if passes is not None else (0, len(plan.passes))
@@ -427,10 +430,10 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
             pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
             warp_of_lane = scoreboard_warps(pix, work.width, gpu)
         elif mode == "fragment" and gpu.raster.warp_packing == "submission":
-            # the rasterizer emits 2x2 quads: 4 shader lanes per quad, helper lanes of partial quads included
-            quads = _quads_so_far(work, lane_keys)
-            n_warps = min(n_lanes, max(1, -(-4 * int(quads[-1]) // ws)))
-            warp_of_lane = np.arange(n_lanes, dtype=np.int64) * n_warps // n_lanes
+            warp_of_lane, quads = submission_warps(work, gpu, lane_keys)
+            given = warps(p, lane_keys) if warps is not None else None
+            if given is not None:
+                warp_of_lane = given
             front = FragmentLanes(lane_keys, warp_of_lane, _raster_positions(work, pk, lane_keys)[1], quads)
         elif mode == "fragment":
             # the rasterizer's quads dealt by tile to their owners, each packing its own into warps of up to
@@ -624,6 +627,15 @@ def _unit_keys(op: str, pass_index, address: np.ndarray, nbytes, gpu) -> list[tu
     return out
 
 
+def memory_load(op: str, address: np.ndarray, nbytes, gpu) -> tuple[np.ndarray, np.ndarray] | None:
+    """The memory partitions' load (:func:`_unit_keys`) of operations ``op`` on ``address`` of ``nbytes`` each:
+    (each row's partition, its load in bytes), or None where they load none."""
+    for name, _, key, weight in _unit_keys(op, 0, address, nbytes, gpu):
+        if name == "memory":
+            return key, weight
+    return None
+
+
 def _word_key(address, pass_index: int) -> np.ndarray:
     """An atomic word in a pass, as one integer (addresses stay under 2**44 bytes)."""
     return np.asarray(address, np.int64) + (np.asarray(pass_index, np.int64) << 44)
@@ -768,6 +780,17 @@ def fragment_lanes(work: Workload, gpu, lane_keys: np.ndarray, pk=None) -> Fragm
         lanes = by_owner[np.repeat(starts[rank] - (np.cumsum(size) - size), size) + np.arange(n)]
     warp = np.repeat(np.arange(len(starts)), size)
     return FragmentLanes(emitted[lanes], warp, None if position is None else position[lanes], quads[lanes])
+
+
+def submission_warps(work: Workload, gpu, lane_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A pixel shader's lanes ``lane_keys`` (ascending fragment threads) packed in submission order
+    (``raster.warp_packing = "submission"``): each lane's warp, over ``ceil(4 x quads / warp_size)`` warps
+    (the rasterizer emits 2x2 quads: 4 lanes a quad, helper lanes of partial quads included), and the quads
+    emitted by the time its own is."""
+    quads = _quads_so_far(work, lane_keys)
+    n = len(lane_keys)
+    n_warps = min(n, max(1, -(-4 * int(quads[-1]) // gpu.core.warp_size)))
+    return np.arange(n, dtype=np.int64) * n_warps // n, quads
 
 
 def fragment_warps(work: Workload, gpu, lane_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -95,8 +95,8 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import (Census, Pieces, Workload, lower, pass_operations, plan_pieces, sample_masks,
-                             share_pieces, split_by, thread_mapping)
+from gpusim.hw.lower import (Census, Pieces, Workload, lower, memory_load, pass_operations, plan_pieces,
+                             sample_masks, share_pieces, split_by, submission_warps, thread_mapping)
 from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.memory.warming import Outcomes
 from gpusim.hw.parallel import fork_map, fork_workers
@@ -502,10 +502,74 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
         return out
     edges = np.flatnonzero(np.diff(np.concatenate(([0], fragment.astype(np.int8), [0]))))
     for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):      # each stretch [a, b) of fragment passes
-        mine = None if pieces is None else Pieces(dataclasses.replace(pc, pass_index=pc.pass_index - a)
-                                                  for pc in pieces if a <= pc.pass_index < b)
-        out[a:b] = memory_bytes(lower(work, gpu, passes=(first + a, first + b), pieces=mine), gpu)
+        mine = (plan_pieces(work, (first + a, first + b)) if pieces is None else
+                Pieces(dataclasses.replace(pc, pass_index=pc.pass_index - a) for pc in pieces if a <= pc.pass_index < b))
+        warps, scale = None, 1.0
+        if gpu.sample.traffic_share < 1 and gpu.raster.warp_packing == "submission":
+            mine, warps, scale = _traffic_warps(work, gpu, mine, first + a, b - a)
+        program = lower(work, gpu, passes=(first + a, first + b), pieces=mine, warps=warps)
+        out[a:b] = memory_bytes(program, gpu) * scale
     return out
+
+
+#: warps a pass's traffic sample keeps at least (:func:`_traffic_warps`): a pass with fewer than this many times
+#: ``1 / sample.traffic_share`` is lowered whole
+MIN_TRAFFIC_WARPS = 256
+
+
+def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int) -> tuple[Pieces, object, np.ndarray]:
+    """The run's traffic sample of the ``pieces`` of ``n_pass`` fragment passes from the plan's ``p0``: in each pass
+    of enough warps (and no scoreboard, which packs its own), one of the run's warps at random in each block of
+    ``round(1 / sample.traffic_share)`` consecutive ones, whole (their bytes are the run's own). (The pieces of those warps'
+    rows, every row of the other passes; the ``warps`` :func:`gpusim.hw.lower.lower` keeps them in; each
+    pass's memory operations over the sample's.)"""
+    c = gpu.sample
+    stride = max(1, round(1 / c.traffic_share))
+    parts = gpu.memory.partitions
+    ops = [g.op for g in work.plan.groups]
+    masks: list = [None] * len(pieces)
+    scale = np.ones((n_pass, parts))
+    chosen: dict[int, np.ndarray] = {}
+    for p, js in split_by(np.array([pc.pass_index for pc in pieces], np.int64)):
+        ps = [pieces[j] for j in js]
+        if any(work.plan.groups[pc.group].op == "scoreboard" for pc in ps):
+            continue
+        lanes = _distinct(np.concatenate([pc.thread for pc in ps]))
+        warp, _ = submission_warps(work, gpu, lanes)
+        if int(warp[-1]) + 1 < MIN_TRAFFIC_WARPS * stride:
+            continue
+        # one warp at random of each block of stride consecutive ones: spread over the pass as systematic
+        # sampling is, without its period (one in every stride picked the same memory partitions' addresses)
+        pick = np.random.default_rng([c.seed, p0 + int(p)]).integers(stride, size=int(warp[-1]) // stride + 1)
+        kept = warp % stride == pick[warp // stride]
+        keep = np.zeros(int(lanes[-1]) + 1, bool)
+        keep[lanes[kept]] = True
+        total, sampled = np.zeros(parts), np.zeros(parts)
+        for j in js:
+            pc = pieces[j]
+            masks[j] = m = keep[pc.thread]
+            load = None if pc.instructions is not None else memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
+            if load is not None:
+                total += np.bincount(load[0], weights=load[1], minlength=parts)
+                sampled += np.bincount(load[0][m], weights=load[1][m], minlength=parts)
+        if not sampled.any():
+            continue
+        scale[p] = np.where(sampled > 0, total / np.maximum(sampled, 1e-9), total.sum() / sampled.sum())
+        chosen[int(p)] = warp[kept] // stride
+    out = Pieces()
+    for pc, m in zip(pieces, masks):
+        if m is None or m.all():
+            out.append(pc)
+        elif m.any():
+            out.append(pc.take(np.flatnonzero(m)))
+
+    def warps(p: int, lane_keys: np.ndarray) -> np.ndarray | None:
+        got = chosen.get(p)
+        if got is not None and len(got) != len(lane_keys):
+            raise RuntimeError(f"traffic sample of pass {p0 + p}: {len(got)} warps chosen for {len(lane_keys)} lanes")
+        return got
+
+    return out, warps, scale
 
 
 def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
