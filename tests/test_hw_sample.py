@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from gpusim.hw import load_gpu
-from gpusim.hw.lower import Workload, _run_loads, _run_words, lower, plan_pieces, submission_warps
+from gpusim.hw.lower import Census, Workload, _run_loads, _run_words, lower, plan_pieces, submission_warps
 from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.sample import Keep, Replicates, run_traffic, sampled_sms, scaled_gpu, t_quantile
 from gpusim.replay import replay, run_functional
@@ -538,6 +538,13 @@ def test_the_runs_traffic_is_estimated_from_a_sample_of_its_own_warps(spheres, m
     got = run_traffic(work, gpu)[capture]
     assert not np.array_equal(got, whole)
     assert np.abs(got / whole - 1).max() < 0.05 and abs(got.sum() / whole.sum() - 1) < 0.02
+    # the run's load on each partition from the census, where the level has counted it: the same figures
+    every = plan_pieces(work)
+    census = Census(work.plan, gpu)
+    for pc in every:
+        if pc.instructions is None:
+            census.add(work.plan.groups[pc.group].op, pc.pass_index, pc.address, pc.nbytes)
+    assert np.allclose(run_traffic(work, gpu, None, None, every, census)[capture], got, rtol=1e-12)
     # the sample: a quarter of the pass's warps, one of each block of 4, each whole (all of its lanes)
     pieces = sample.Pieces(pc for pc in plan_pieces(work) if pc.pass_index == capture)
     for pc in pieces:

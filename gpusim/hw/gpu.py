@@ -83,8 +83,9 @@ class SampleConfig:
                               "(a pass's end, its latest SM's, taken to grow as the log of the SMs); costs about "
                               "half of the replicates' event work more")
     run_traffic: bool = param(True, doc="set the memory partitions' load in the graphics pipeline's fragment "
-                              "passes from the whole run's coalesced traffic, which the level then lowers once (on "
-                              "a GPU with an L2 it lowers the whole run anyway, to warm it): a replicate packs "
+                              "passes from the whole run's coalesced traffic, estimated from a sample of the run's "
+                              "warps (traffic_share; on a GPU with an L2, from the whole run, lowered anyway to "
+                              "warm it): a replicate packs "
                               "fragments of tiles far apart into its warps, which coalesce worse than the run's; "
                               "off, a replicate's traffic is scaled by its operations' bytes, quicker (the run's "
                               "lowering took half as long as the replicates on TFSS) but up to 7% over on the "

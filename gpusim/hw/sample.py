@@ -20,8 +20,8 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   hot partitions) and its latencies, and the rest of the GPU's traffic on it
   (the run's load on each instance in each pass less the sample's,
   ``Program.occupancy`` and ``Program.own_load``; on the memory partitions the
-  run's coalesced bytes less the sample's, ``sample.run_traffic``,
-  :func:`coalesced_load`) holds an L2 slice, atomic
+  run's coalesced bytes less the sample's, ``sample.run_traffic``, estimated from
+  a sample of the run's own warps, ``sample.traffic_share``, :func:`coalesced_load`) holds an L2 slice, atomic
   unit or ROP right after the instruction that came with it, and is pooled
   over every DRAM channel in the run's mix as the sample's requests come, each
   channel taking its share ahead of the sample's next request there
@@ -484,14 +484,17 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=
 
 
 def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, program: Program | None = None,
-                pieces: list | None = None) -> np.ndarray | None:
+                pieces: list | None = None, census: Census | None = None) -> np.ndarray | None:
     """The run's coalesced memory traffic (:func:`memory_bytes`, (passes, partitions)) in those of its passes
     ``passes`` (all by default) whose fragment threads a replicate packs into warps of its own (the graphics
     pipeline's fragment shaders, ``thread_mapping`` "fragment"); NaN in the others, whose samples keep the
     run's warps (a software rasterizer's triangle blocks, threads that fill warps in order) and coalesce as it
     does. From ``program``, the run's (or those passes') lowering where it is at hand (the L2's warming), else
     by lowering each stretch of such passes, from ``pieces`` (:func:`plan_pieces` of ``passes``) where they are
-    at hand. None where there are none."""
+    at hand: in a pass of enough warps, a sample of the run's own warps (:func:`_traffic_warps`,
+    ``sample.traffic_share``), each partition's bytes theirs times the run's load on it over theirs
+    (``census``, the run's census of ``passes``, gives the run's load where it is at hand). None where there are
+    none."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     fragment = np.array([thread_mapping(gpu, pk) == "fragment" for pk in work.plan.passes[first:end]], bool)
     if not fragment.any():
@@ -506,7 +509,9 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
                 Pieces(dataclasses.replace(pc, pass_index=pc.pass_index - a) for pc in pieces if a <= pc.pass_index < b))
         warps, scale = None, 1.0
         if gpu.sample.traffic_share < 1 and gpu.raster.warp_packing == "submission":
-            mine, warps, scale = _traffic_warps(work, gpu, mine, first + a, b - a)
+            load = (None if census is None or "memory" not in census.every else
+                    census.every["memory"].reshape(-1, gpu.memory.partitions)[a:b])
+            mine, warps, scale = _traffic_warps(work, gpu, mine, first + a, b - a, load)
         program = lower(work, gpu, passes=(first + a, first + b), pieces=mine, warps=warps)
         out[a:b] = memory_bytes(program, gpu) * scale
     return out
@@ -517,12 +522,14 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
 MIN_TRAFFIC_WARPS = 256
 
 
-def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int) -> tuple[Pieces, object, np.ndarray]:
+def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load: np.ndarray | None = None
+                   ) -> tuple[Pieces, object, np.ndarray]:
     """The run's traffic sample of the ``pieces`` of ``n_pass`` fragment passes from the plan's ``p0``: in each pass
     of enough warps (and no scoreboard, which packs its own), one of the run's warps at random in each block of
     ``round(1 / sample.traffic_share)`` consecutive ones, whole (their bytes are the run's own). (The pieces of those warps'
     rows, every row of the other passes; the ``warps`` :func:`gpusim.hw.lower.lower` keeps them in; each
-    pass's memory operations over the sample's.)"""
+    pass's load on each memory partition over the sample's: ``load``, the run's (passes, partitions), where the
+    census has counted it.)"""
     c = gpu.sample
     stride = max(1, round(1 / c.traffic_share))
     parts = gpu.memory.partitions
@@ -544,14 +551,21 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int) -> t
         kept = warp % stride == pick[warp // stride]
         keep = np.zeros(int(lanes[-1]) + 1, bool)
         keep[lanes[kept]] = True
-        total, sampled = np.zeros(parts), np.zeros(parts)
+        total = np.zeros(parts) if load is None else load[p]
+        sampled = np.zeros(parts)
         for j in js:
             pc = pieces[j]
             masks[j] = m = keep[pc.thread]
-            load = None if pc.instructions is not None else memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
-            if load is not None:
-                total += np.bincount(load[0], weights=load[1], minlength=parts)
-                sampled += np.bincount(load[0][m], weights=load[1][m], minlength=parts)
+            if pc.instructions is not None or not m.any():
+                continue
+            nbytes = pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[m]
+            got = memory_load(ops[pc.group], pc.address[m], nbytes, gpu)
+            if got is not None:
+                sampled += np.bincount(got[0], weights=got[1], minlength=parts)
+            if load is None:
+                got = memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
+                if got is not None:
+                    total += np.bincount(got[0], weights=got[1], minlength=parts)
         if not sampled.any():
             continue
         scale[p] = np.where(sampled > 0, total / np.maximum(sampled, 1e-9), total.sum() / sampled.sum())
@@ -740,6 +754,20 @@ def _chunked_sms(work: Workload, gpu, reps: Replicates, members: list, chunks: l
     return [fitted_sms(gpu, k, total, floor) for k, (_, floor) in zip(kept, members)]
 
 
+def _members_of(reps: Replicates, gpu) -> tuple[list, int, list]:
+    """The samples the level runs, each (sample, fewest SMs): the replicates; where they are thinned, the work
+    checks (pairs of replicates' samples together on the same SMs: twice the work); the scale check (replicates
+    0 and 1 on their SMs together). Also the replicates run (one where each would be the whole run) and the
+    work checks."""
+    count = 1 if reps.share >= 1 else reps.count          # every replicate the whole run: the same figures
+    members = [(r, _floor(reps, r)) for r in range(count)]
+    work_checks = [p for p in WORK_CHECKS if max(p) < count] if reps.theta < 1 else []
+    members += [(p, reps.sms) for p in work_checks]
+    if count > 1 and gpu.sample.scale_check:
+        members.append((SCALE_CHECK, _floor(reps, SCALE_CHECK)))
+    return members, count, work_checks
+
+
 def scale_check(totals: np.ndarray, machines: list[int], check_run: tuple[dict, int] | None,
                 sms: int) -> dict | None:
     """The scale check's figures: from the replicates' cycles ``totals`` on their SMs ``machines`` and the
@@ -773,22 +801,15 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         raise carried_state(work, gpu)
     rmw_all = rmw_threads(work.plan, work)
     pieces = outcomes = run_bytes = None
+    members, count, work_checks = _members_of(reps, gpu)
     if chunks is None:
         pieces, _, every = _pieces(work, gpu, reps, None)
         warm = share < 1 and gpu.l2.size_bytes and "l2" in gpu.memory.levels
         run = lower(work, gpu, pieces=every) if warm else None    # the run's L2 outcomes (warming)
         outcomes = Outcomes(run, gpu) if warm else None
-        run_bytes = (run_traffic(work, gpu, None, run, every) if share < 1 and gpu.sample.run_traffic
-                     else None)
+        run_bytes = (run_traffic(work, gpu, None, run, every, pieces.census)
+                     if share < 1 and gpu.sample.run_traffic else None)
         del run, every
-    count = 1 if share >= 1 else reps.count          # every replicate the whole run: the same figures
-    # (sample, fewest SMs): the replicates; where they are thinned, the work checks (pairs of replicates' samples
-    # together on the same SMs: twice the work); the scale check (replicates 0 and 1 on their SMs together)
-    members = [(r, _floor(reps, r)) for r in range(count)]
-    work_checks = [p for p in WORK_CHECKS if max(p) < count] if reps.theta < 1 else []
-    members += [(p, reps.sms) for p in work_checks]
-    if count > 1 and gpu.sample.scale_check:
-        members.append((SCALE_CHECK, _floor(reps, SCALE_CHECK)))
     if chunks is None:
 
         def replicate(member, gpu=gpu) -> tuple[dict, int]:
@@ -820,7 +841,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
             pieces, _, every = _pieces(work, gpu, reps, (first, end))
-            run_bytes = (run_traffic(work, gpu, (first, end), pieces=every)
+            run_bytes = (run_traffic(work, gpu, (first, end), pieces=every, census=pieces.census)
                          if reps.share < 1 and gpu.sample.run_traffic else None)
             del every
             for i, (r, _) in enumerate(members):
