@@ -526,8 +526,9 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
                    ) -> tuple[Pieces, object, np.ndarray]:
     """The run's traffic sample of the ``pieces`` of ``n_pass`` fragment passes from the plan's ``p0``: in each pass
     of enough warps (and no scoreboard, which packs its own), one of the run's warps at random in each block of
-    ``round(1 / sample.traffic_share)`` consecutive ones, whole (their bytes are the run's own). (The pieces of those warps'
-    rows, every row of the other passes; the ``warps`` :func:`gpusim.hw.lower.lower` keeps them in; each
+    ``round(1 / sample.traffic_share)`` consecutive ones (none where that is 1), whole (their bytes are the run's
+    own); a pass whose sample reaches no load on a partition the run loads is left whole. (The pieces of those
+    warps' rows, every row of the other passes; the ``warps`` :func:`gpusim.hw.lower.lower` keeps them in; each
     pass's load on each memory partition over the sample's: ``load``, the run's (passes, partitions), where the
     census has counted it.)"""
     c = gpu.sample
@@ -537,7 +538,7 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
     masks: list = [None] * len(pieces)
     scale = np.ones((n_pass, parts))
     chosen: dict[int, np.ndarray] = {}
-    for p, js in split_by(np.array([pc.pass_index for pc in pieces], np.int64)):
+    for p, js in ([] if stride == 1 else split_by(np.array([pc.pass_index for pc in pieces], np.int64))):
         ps = [pieces[j] for j in js]
         if any(work.plan.groups[pc.group].op == "scoreboard" for pc in ps):
             continue
@@ -555,20 +556,23 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
         sampled = np.zeros(parts)
         for j in js:
             pc = pieces[j]
-            masks[j] = m = keep[pc.thread]
-            if pc.instructions is not None or not m.any():
+            m = keep[pc.thread]
+            if pc.instructions is not None:
                 continue
-            nbytes = pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[m]
-            got = memory_load(ops[pc.group], pc.address[m], nbytes, gpu)
-            if got is not None:
-                sampled += np.bincount(got[0], weights=got[1], minlength=parts)
             if load is None:
                 got = memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
                 if got is not None:
                     total += np.bincount(got[0], weights=got[1], minlength=parts)
-        if not sampled.any():
+            if m.any():
+                nbytes = pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[m]
+                got = memory_load(ops[pc.group], pc.address[m], nbytes, gpu)
+                if got is not None:
+                    sampled += np.bincount(got[0], weights=got[1], minlength=parts)
+        if ((total > 0) & (sampled <= 0)).any():     # a partition the sample does not reach: the pass whole
             continue
-        scale[p] = np.where(sampled > 0, total / np.maximum(sampled, 1e-9), total.sum() / sampled.sum())
+        for j in js:
+            masks[j] = keep[pieces[j].thread]
+        scale[p] = np.where(total > 0, total / np.where(sampled > 0, sampled, 1.0), 1.0)
         chosen[int(p)] = warp[kept] // stride
     out = Pieces()
     for pc, m in zip(pieces, masks):
