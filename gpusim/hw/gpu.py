@@ -93,9 +93,10 @@ class SampleConfig:
     traffic_share: float = param(0.125, unit="1", doc="share of the run's warps the level lowers for its "
                                  "coalesced traffic (sample.run_traffic) in a fragment-shader pass packed in "
                                  "submission order: one warp at random of every round(1 / share) consecutive ones, "
-                                 "the run's own warps; each partition's bytes in the pass are theirs times the run's "
-                                 "memory load on it over theirs. A pass of fewer than 256 / share warps, or with a "
-                                 "scoreboard, is lowered whole, and every pass where round(1 / share) is 1", gt=0, max=1)
+                                 "the run's own warps; each partition's bytes in the pass are the run's memory load on "
+                                 "it times their coalesced bytes per unit of their load. A pass of fewer than "
+                                 "1024 / share warps, or with a scoreboard, is lowered whole, and every pass where "
+                                 "round(1 / share) is 1", gt=0, max=1)
 
 
 register_section("runner", RunnerConfig)
