@@ -94,7 +94,7 @@ class SampleConfig:
                                  "coalesced traffic (sample.run_traffic) in a fragment-shader pass packed in "
                                  "submission order: one warp at random of every round(1 / share) consecutive ones, "
                                  "the run's own warps; each partition's bytes in the pass are the run's memory load on "
-                                 "it times their coalesced bytes per unit of their load. A pass of fewer than "
+                                 "it times their coalesced bytes per unit of their load there. A pass of fewer than "
                                  "1024 / share warps, or with a scoreboard, is lowered whole, and every pass where "
                                  "round(1 / share) is 1", gt=0, max=1)
 

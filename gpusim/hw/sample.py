@@ -493,8 +493,8 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
     by lowering each stretch of such passes, from ``pieces`` (:func:`plan_pieces` of ``passes``) where they are
     at hand: in a pass of enough warps, from a sample of the run's own warps (:func:`_traffic_warps`,
     ``sample.traffic_share``), each partition's bytes the run's memory load on it times the sample's coalesced
-    bytes per unit of its load (``census``, the run's census of ``passes``, gives the run's load where it is at
-    hand). None where there are none."""
+    bytes per unit of its load there (``census``, the run's census of ``passes``, gives the run's load where it
+    is at hand). None where there are none."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     fragment = np.array([thread_mapping(gpu, pk) == "fragment" for pk in work.plan.passes[first:end]], bool)
     if not fragment.any():
@@ -507,21 +507,18 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
     for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):      # each stretch [a, b) of fragment passes
         mine = (plan_pieces(work, (first + a, first + b)) if pieces is None else
                 Pieces(dataclasses.replace(pc, pass_index=pc.pass_index - a) for pc in pieces if a <= pc.pass_index < b))
-        warps = run_load = None
+        warps = scale = None
         if gpu.sample.traffic_share < 1 and gpu.raster.warp_packing == "submission":
             load = (None if census is None or "memory" not in census.every else
                     census.every["memory"].reshape(-1, gpu.memory.partitions)[a:b])
-            mine, warps, run_load = _traffic_warps(work, gpu, mine, first + a, b - a, load)
+            mine, warps, scale = _traffic_warps(work, gpu, mine, first + a, b - a, load)
         got = memory_bytes(lower(work, gpu, passes=(first + a, first + b), pieces=mine, warps=warps), gpu)
-        if run_load is not None:         # a sampled pass: the run's load at the sample's bytes per unit of it
-            rows = ~np.isnan(run_load[:, 0])
-            got[rows] = run_load[rows, :-1] * (got[rows].sum(axis=1) / run_load[rows, -1])[:, None]
-        out[a:b] = got
+        out[a:b] = got if scale is None else got * scale
     return out
 
 
 #: warps a pass's traffic sample keeps at least (:func:`_traffic_warps`): a pass with fewer than this many times
-#: ``1 / sample.traffic_share`` is lowered whole (with 256, a pass's bytes on a partition were up to 7% off on the
+#: ``1 / sample.traffic_share`` is lowered whole (with 256, a partition's bytes were up to 7% off on the
 #: 193K-fragment default scene at 256x256, and the quick-start report's median sampled error doubled)
 MIN_TRAFFIC_WARPS = 1024
 
@@ -532,17 +529,17 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
     of enough warps (and no scoreboard, which packs its own), one of the run's warps at random in each block of
     ``round(1 / sample.traffic_share)`` consecutive ones (none where that is 1), whole (their bytes are the run's
     own). (The pieces of those warps' rows, every row of the other passes; the ``warps``
-    :func:`gpusim.hw.lower.lower` keeps them in; per pass (passes, partitions + 1), the run's memory load on each
-    partition (``load``, where the census has counted it) and the sample's load in all, NaN where the pass is
-    left whole.) A pass's coalesced bytes per unit of load are taken to be the same on every partition (the
-    addresses are interleaved finely): scaled partition by partition, the sample's own spread over the
-    partitions put a partition's bytes up to 7% off where the pass's were within 2%."""
+    :func:`gpusim.hw.lower.lower` keeps them in; per pass and partition, the run's memory load on it (``load``,
+    where the census has counted it) over the sample's, 1 where the pass is left whole.) Each partition is
+    scaled by its own ratio: one ratio for the pass (its coalescing taken to be the same on every partition)
+    put the stencil-routed A-buffer's partitions up to 9% off on 32x32 pixels, whose stencil and sample arrays,
+    which coalesce differently, lie on the partitions in different mixes (its cycles 7.6% short)."""
     c = gpu.sample
     stride = max(1, round(1 / c.traffic_share))
     parts = gpu.memory.partitions
     ops = [g.op for g in work.plan.groups]
     masks: list = [None] * len(pieces)
-    run_load = np.full((n_pass, parts + 1), np.nan)
+    scale = np.ones((n_pass, parts))
     chosen: dict[int, np.ndarray] = {}
     for p, js in ([] if stride == 1 else split_by(np.array([pc.pass_index for pc in pieces], np.int64))):
         ps = [pieces[j] for j in js]
@@ -559,7 +556,7 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
         keep = np.zeros(int(lanes[-1]) + 1, bool)
         keep[lanes[kept]] = True
         total = np.zeros(parts) if load is None else load[p]
-        sampled = 0.0
+        sampled = np.zeros(parts)
         for j in js:
             pc = pieces[j]
             m = keep[pc.thread]
@@ -572,12 +569,13 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
             if m.any():
                 got = memory_load(ops[pc.group], pc.address[m], pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[m],
                                   gpu)
-                sampled += float(got[1].sum()) if got is not None else 0.0
-        if sampled <= 0:                  # the sample carries none of the pass's load: the pass whole
+                if got is not None:
+                    sampled += np.bincount(got[0], weights=got[1], minlength=parts)
+        if ((total > 0) & (sampled <= 0)).any():     # a partition the sample does not reach: the pass whole
             continue
         for j in js:
             masks[j] = keep[pieces[j].thread]
-        run_load[p, :-1], run_load[p, -1] = total, sampled
+        scale[p] = np.where(total > 0, total / np.where(sampled > 0, sampled, 1.0), 1.0)
         chosen[int(p)] = warp[kept] // stride
     out = Pieces()
     for pc, m in zip(pieces, masks):
@@ -592,7 +590,7 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
             raise RuntimeError(f"traffic sample of pass {p0 + p}: {len(got)} warps chosen for {len(lane_keys)} lanes")
         return got
 
-    return out, warps, run_load
+    return out, warps, scale
 
 
 def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
