@@ -95,7 +95,7 @@ class SampleConfig:
                                  "submission order: one warp at random of every round(1 / share) consecutive ones, "
                                  "the run's own warps; each partition's bytes in the pass are the run's memory load on "
                                  "it times their coalesced bytes per unit of their load there. A pass of fewer than "
-                                 "1024 / share warps, or with a scoreboard, is lowered whole, and every pass where "
+                                 "2048 / share warps, or with a scoreboard, is lowered whole, and every pass where "
                                  "round(1 / share) is 1", gt=0, max=1)
 
 
