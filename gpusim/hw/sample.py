@@ -558,9 +558,9 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
         keep[lanes[kept]] = True
         total = np.zeros(parts) if load is None else load[p]
         sampled = np.zeros(parts)
-        for j in js:
+        mine = [keep[pieces[j].thread] for j in js]
+        for j, m in zip(js, mine):
             pc = pieces[j]
-            m = keep[pc.thread]
             if pc.instructions is not None:
                 continue
             if load is None:
@@ -574,8 +574,8 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
                     sampled += np.bincount(got[0], weights=got[1], minlength=parts)
         if ((total > 0) & (sampled <= 0)).any():     # a partition the sample does not reach: the pass whole
             continue
-        for j in js:
-            masks[j] = keep[pieces[j].thread]
+        for j, m in zip(js, mine):
+            masks[j] = m
         scale[p] = np.where(total > 0, total / np.where(sampled > 0, sampled, 1.0), 1.0)
         chosen[int(p)] = warp[kept] // stride
     out = Pieces()
