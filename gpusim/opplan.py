@@ -108,6 +108,24 @@ class Pass:
         return self.kind == "geometry" and self.threads == "fragment" and self.shading != "none"
 
 
+def expand_counts(who: np.ndarray, count: np.ndarray, s0: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """``(i, seq)`` of ``count[j]`` operations of each thread ``who[j]``, in thread then program order, numbered
+    from ``s0`` within each thread. Where every thread has as many (a loop of fixed length, the usual case), one
+    broadcast fill each: several times faster than the two ragged repeats."""
+    n = len(who)
+    if n and int(count.min()) == int(count.max()):
+        k = int(count[0])
+        i = np.empty((n, k), np.int64)
+        i[:] = np.asarray(who, np.int64)[:, None]
+        seq = np.empty((n, k), np.int64)
+        seq[:] = np.arange(s0, s0 + k, dtype=np.int64)
+        return i.ravel(), seq.ravel()
+    i = np.repeat(who, count)
+    seq = np.arange(len(i), dtype=np.int64)
+    seq -= np.repeat(np.cumsum(count) - count - s0, count)
+    return i, seq
+
+
 @dataclass
 class OpGroup:
     """``count[i]`` operations of one kind by thread ``thread[i]``; offsets from ``offset(i, seq)``."""
@@ -145,10 +163,7 @@ class OpGroup:
         i = np.arange(n, dtype=np.int64)
         if n and int(count.min()) == 1 and int(count.max()) == 1:
             return i, np.broadcast_to(np.zeros(1, np.int64), (n,))
-        i = np.repeat(i, count)
-        first = np.cumsum(count) - count
-        seq = np.arange(len(i), dtype=np.int64) - np.repeat(first, count)
-        return i, seq
+        return expand_counts(i, count)
 
     def thread_ids(self) -> np.ndarray:
         """The thread ids as an array (``arange`` for a :class:`ThreadRange`)."""

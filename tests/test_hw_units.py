@@ -436,3 +436,16 @@ def test_interleave_spreads_strided_rows_and_keeps_each_share_one_to_one(n):
     x, y = np.meshgrid(np.arange(48, 80), np.arange(128))
     load = np.bincount(interleave((y * 128 + x).ravel() * 16, 256, n), minlength=n)
     assert load.max() <= 1.2 * load.mean()               # a plain b mod 8 put them on 2 of 8 partitions
+
+
+@pytest.mark.parametrize("granularity,n", [(256, 8), (256, 6), (128, 4), (100, 8), (64, 10)])
+def test_interleave_kernel_gives_the_numpy_instances(monkeypatch, granularity, n):
+    """A long address array takes the compiled kernel (where numba is usable): the same instances as numpy's."""
+    from gpusim.hw import unit
+    from gpusim.jit import numba_usable
+    address = np.random.default_rng(n).integers(0, 1 << 40, 3 * unit._CHUNK, dtype=np.int64)
+    compiled = unit.interleave(address, granularity, n)
+    assert not numba_usable() or unit._KERNEL[0] is not None
+    monkeypatch.setattr(unit, "_KERNEL", [None])
+    plain = unit.interleave(address, granularity, n)
+    assert compiled.dtype == plain.dtype and np.array_equal(compiled, plain)

@@ -45,7 +45,7 @@ from gpusim.hw.scoreboard import scoreboard_cell
 from gpusim.hw.unit import div, entry_unit, interleave, mod
 from gpusim.jit import compiled_once
 from gpusim.metrics.composite import run_starts
-from gpusim.opplan import OPS, OpPlan
+from gpusim.opplan import OPS, OpPlan, expand_counts
 from gpusim.schemes.common.arrays import lex_sorted, rank_in_runs, split_by
 from gpusim.schemes.common.reorder import submitted_primitives
 
@@ -194,8 +194,7 @@ def ops_in_passes(g, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
         p = np.asarray(g.pass_of(i, seq), np.int64)
         sel = np.flatnonzero((p >= lo) & (p < hi))
         return i[sel], seq[sel]
-    i = np.repeat(who, m)
-    return i, np.arange(len(i), dtype=np.int64) - np.repeat(np.cumsum(m) - m, m) + s0
+    return expand_counts(who, m, s0)
 
 
 def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None, keep_rows=None,
@@ -210,22 +209,20 @@ def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | N
     if not len(i):
         return []
     single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
+    pass_of = g.pass_of(i, seq)
+    rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
+    if rows is not None and not rows.all():      # the kept rows, before their addresses are made
+        sel = np.flatnonzero(rows)
+        if not len(sel):
+            return []
+        i, seq = i[sel], seq[sel]
+        pass_of = pass_of if np.isscalar(pass_of) else pass_of[sel]
     instr = np.asarray(g.instructions)[i] if g.is_compute else None
     if addresses:
         addr = np.asarray(g.offset(i, seq), np.int64) + (0 if g.is_compute else bases[g.structure])
         nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
     else:
         addr, nbytes = np.broadcast_to(np.int64(0), (len(i),)), 0
-    pass_of = g.pass_of(i, seq)
-    rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
-    if rows is not None and not rows.all():
-        sel = np.flatnonzero(rows)
-        if not len(sel):
-            return []
-        i, seq, addr = i[sel], seq[sel], addr[sel]
-        nbytes = nbytes if np.isscalar(nbytes) else nbytes[sel]
-        instr = None if instr is None else instr[sel]
-        pass_of = pass_of if np.isscalar(pass_of) else pass_of[sel]
     whole = single and len(i) == n                 # every thread's one operation, in thread order
     if np.isscalar(pass_of):
         return [_Piece(gi, int(pass_of), threads if whole else threads[i], None if single else seq, addr, nbytes,
@@ -274,13 +271,52 @@ class Census:
         """Count a memory group's operations: their passes (the plan's numbers), addresses and bytes."""
         p = pass_of - self.p_first
         for name, n, key, weight in _unit_keys(op, p, address, nbytes, self.gpu):
-            self.every[name] = self.every.get(name, 0) + np.bincount(key, weights=weight, minlength=self.n_pass * n)
+            self.every[name] = self.every.get(name, 0) + unit_load(key, weight, self.n_pass * n)
         if entry_unit(op) == "atomic":
             self.words.append(_word_key(address, p))
 
     def word_ops(self) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`_word_ops` of the run's atomic operations."""
         return np.unique(np.concatenate(self.words), return_counts=True) if self.words else None
+
+
+def pass_threads(plan: OpPlan, lo: int, hi: int) -> dict[int, list[tuple[str, np.ndarray]]]:
+    """Per pass ``lo`` to ``hi - 1`` (the plan's numbers) that holds operations: each group's (operation, threads
+    with an operation in it), from the groups' threads and counts, without expanding their operations
+    where the group says where its passes fall (a pass of its own, ``seq_pass``, a pass per thread)."""
+    out: dict[int, list] = {}
+    for g in plan.groups:
+        tid, count = g.thread_ids(), g.count
+        if g.seq_pass is not None:          # op s of every thread with more than s of them, in seq_pass[s]
+            found = [(int(p), tid[count > s]) for s, p in enumerate(g.seq_pass.tolist()) if lo <= p < hi]
+        elif g.pass_fn is None and np.isscalar(g.pass_index):
+            p = int(g.pass_index)
+            found = [(p, tid if len(count) and int(count.min()) > 0 else tid[count > 0])] if lo <= p < hi else []
+        elif g.pass_fn is None:
+            sel = np.flatnonzero((g.pass_index >= lo) & (g.pass_index < hi) & (count > 0))
+            found = [(p, tid[sel[js]]) for p, js in split_by(np.asarray(g.pass_index, np.int64)[sel])]
+        else:
+            i, seq = ops_in_passes(g, lo, hi)
+            found = [(p, np.unique(tid[i[js]])) for p, js in split_by(np.asarray(g.pass_of(i, seq), np.int64))]
+        for p, t in found:
+            if len(t):
+                out.setdefault(p, []).append((g.op, t))
+    return out
+
+
+def census_of(work: Workload, gpu, passes: tuple[int, int] | None = None, rows: int = 1 << 20) -> Census:
+    """The :class:`Census` of every memory operation of the run (of its passes ``passes``), counted a slice of
+    ``rows`` of a group's operations at a time, without the pieces of every row: those hold every row's
+    thread, iteration and address at once, which cost the sampled level more than the counting does."""
+    census = Census(work.plan, gpu, passes)
+    for g in work.plan.memory_groups:
+        i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
+        for lo in range(0, len(i), rows):
+            ii, ss = i[lo:lo + rows], seq[lo:lo + rows]
+            nbytes = np.asarray(g.bytes(ii, ss), np.int32) if callable(g.bytes) else int(g.bytes)
+            census.add(g.op, g.pass_of(ii, ss), np.asarray(g.offset(ii, ss), np.int64) + work.bases[g.structure],
+                       nbytes)
+    return census
 
 
 def share_pieces(pieces: Pieces, plan: OpPlan, gpu, n_pass: int) -> None:
@@ -599,8 +635,7 @@ def _run_loads(pieces, plan: OpPlan, gpu, n_pass: int) -> dict:
             cache["keys"].append(entries)
             if census is None:
                 for name, n, key, weight in entries:
-                    cache["every"][name] = cache["every"].get(name, 0) + np.bincount(key, weights=weight,
-                                                                                     minlength=n_pass * n)
+                    cache["every"][name] = cache["every"].get(name, 0) + unit_load(key, weight, n_pass * n)
         if isinstance(pieces, Pieces):
             pieces.loads = cache
     return cache
@@ -625,6 +660,14 @@ def _unit_keys(op: str, pass_index, address: np.ndarray, nbytes, gpu) -> list[tu
         weight = np.broadcast_to(per_op + per_byte * np.asarray(nbytes, np.float64), key.shape)
         out.append((name, n, key, weight))
     return out
+
+
+def unit_load(key: np.ndarray, weight: np.ndarray, size: int) -> np.ndarray:
+    """The load on each of ``size`` unit instances (keys, :func:`_unit_keys`) of rows ``key`` each of ``weight``:
+    a count times the one weight where every row weighs the same (a broadcast), far faster than weighing each."""
+    if weight.ndim == 1 and len(weight) and weight.strides == (0,):
+        return np.bincount(key, minlength=size) * float(weight[0])
+    return np.bincount(key, weights=weight, minlength=size)
 
 
 def memory_load(op: str, address: np.ndarray, nbytes, gpu) -> tuple[np.ndarray, np.ndarray] | None:

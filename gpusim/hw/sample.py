@@ -95,8 +95,9 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import (Census, Pieces, Workload, lower, memory_load, pass_operations, plan_pieces,
-                             sample_masks, share_pieces, split_by, submission_warps, thread_mapping)
+from gpusim.hw.lower import (Census, Pieces, Workload, census_of, lower, memory_load, pass_operations, pass_threads,
+                             plan_pieces, sample_masks, share_pieces, split_by, submission_warps, thread_mapping,
+                             unit_load)
 from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.memory.warming import Outcomes
 from gpusim.hw.parallel import fork_map, fork_workers
@@ -157,15 +158,18 @@ def sampled_sms(gpu, tiles: int | None = None) -> int:
     return m
 
 
-def thinning(gpu, tiles: int, sms: int) -> float:
+def thinning(gpu, tiles: int, sms: int, blocks: int | None = None) -> float:
     """The share of its SMs' work a replicate on ``sms`` SMs keeps, on a run whose fragments lie in ``tiles``
-    screen tiles: ``sample.thin``, raised until the replicate keeps ``sample.thin_min_tiles`` tiles; 1 (no
-    thinning) where that is over 0.5 (the work checks, at twice the share, would cost about what it saves) or
-    the replicate is the run."""
+    screen tiles (and, where a software rasterizer's passes sample triangle blocks, of ``blocks`` such
+    blocks): ``sample.thin``, raised until the replicate keeps ``sample.thin_min_tiles`` tiles (and as many
+    triangle blocks: a replicate of fewer holds little more than the largest triangle's block, which every
+    replicate holds, so their spread shows nothing of its error); 1 (no thinning) where that is over 0.5
+    (the work checks, at twice the share, would cost about what it saves) or the replicate is the run."""
     c = gpu.sample
-    if c.thin >= 1 or sms >= gpu.core.sms or not tiles:
+    units = tiles if blocks is None else min(tiles, blocks)
+    if c.thin >= 1 or sms >= gpu.core.sms or not units:
         return 1.0
-    theta = max(c.thin, c.thin_min_tiles / (tiles * sms / gpu.core.sms))
+    theta = max(c.thin, c.thin_min_tiles / (units * sms / gpu.core.sms))
     return theta if theta <= 0.5 else 1.0
 
 
@@ -247,17 +251,18 @@ class Replicates:
         self.frag_tile = self.tile_of(pixel)
         frag_tiles = np.bincount(self.frag_tile, minlength=self.tiles_x * -(-work.height // c.tile))
         occupied = int((frag_tiles > 0).sum())
+        triangles = max(work.triangles, int(prims.max()) + 1 if len(prims) else 0)
+        per_triangle = np.bincount(prims, minlength=triangles)
+        blocks = -(-triangles // ws)
+        software = any(thread_mapping(gpu, pk) == "triangle" for pk in work.plan.passes)
         self.theta = 1.0                         # the share of its SMs' work a replicate keeps (thinning)
         if share is None:
             self.sms = sampled_sms(gpu, occupied)
-            self.theta = thinning(gpu, occupied, self.sms)
+            self.theta = thinning(gpu, occupied, self.sms, blocks if software else None)
             share = self.sms / gpu.core.sms * self.theta
         self.share = share
         self.tiles = _stratified(frag_tiles, frag_tiles > 0, share, self.count, rng,
                                  int(self.tile_of(self.deepest)) if len(pixel) else -1)
-        triangles = max(work.triangles, int(prims.max()) + 1 if len(prims) else 0)
-        per_triangle = np.bincount(prims, minlength=triangles)
-        blocks = -(-triangles // ws)
         self.triangles = _stratified(np.bincount(np.arange(triangles) // ws, weights=per_triangle,
                                                  minlength=blocks), np.ones(blocks, bool), share, self.count, rng,
                                      int(per_triangle.argmax()) // ws if len(prims) else -1)
@@ -329,7 +334,8 @@ class Replicates:
                 self.units[p] = [self.frag_tile[t] for t in threads]
             else:
                 lanes = self.warps(p, threads)[0]
-                self.units[p] = [np.searchsorted(lanes, t) // ws for t in threads]
+                rank = _ranks(lanes)
+                self.units[p] = [rank(t) // ws for t in threads]
         return self.units[p]
 
     def warps(self, p: int, threads: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -338,8 +344,7 @@ class Replicates:
         or the warp with the most operations in every replicate (the longest chain of a latency-bound pass:
         a pass of few warps ends with its heaviest)."""
         if p not in self.lanes:
-            every = np.concatenate(threads)
-            lanes = _distinct(every)
+            lanes = _distinct(threads)
             ws = self.gpu.core.warp_size
             n = -(-len(lanes) // ws)
             pixels = self.work.plan.passes[p].threads == "pixel"
@@ -347,7 +352,10 @@ class Replicates:
                 weight = np.bincount(np.arange(len(lanes)) // ws, weights=self.depth[lanes], minlength=n)
                 certain = int(np.searchsorted(lanes, self.deepest)) // ws if self.deepest in lanes else -1
             else:                      # a thread's rows: its memory operations and compute steps in the pass
-                weight = np.bincount(np.searchsorted(lanes, every) // ws, minlength=n).astype(np.float64)
+                rank = _ranks(lanes)
+                weight = np.zeros(n)
+                for t in threads:
+                    weight += np.bincount(rank(t) // ws, minlength=n)
                 certain = int(weight.argmax()) if n else -1
             self.lanes[p] = lanes, _stratified(weight, np.ones(n, bool), self.share, self.count,
                                                np.random.default_rng([self.seed, p]), certain)
@@ -400,17 +408,30 @@ def _members(r: int | tuple[int, ...]) -> tuple[int, ...]:
     return r if isinstance(r, tuple) else (r,)
 
 
-def _distinct(values: np.ndarray) -> np.ndarray:
-    """The distinct values of a non-negative integer array, ascending (a mask over their range when it is
-    small, as thread ids are: far faster than hashing)."""
-    if not len(values):
-        return values
-    lo, hi = int(values.min()), int(values.max())
-    if hi - lo > 8 * len(values):
-        return np.unique(values)
+def _distinct(values: np.ndarray | list[np.ndarray]) -> np.ndarray:
+    """The distinct values of a non-negative integer array (or of several together), ascending (a mask over
+    their range when it is small, as thread ids are: far faster than hashing, and several arrays are marked
+    one at a time, not joined first: a pass's pieces hold each thread once per operation)."""
+    parts = [v for v in ([values] if isinstance(values, np.ndarray) else values) if len(v)]
+    if not parts:
+        return values if isinstance(values, np.ndarray) else np.zeros(0, np.int64)
+    lo, hi = min(int(v.min()) for v in parts), max(int(v.max()) for v in parts)
+    if hi - lo > 8 * sum(len(v) for v in parts):
+        return np.unique(np.concatenate(parts))
     seen = np.zeros(hi - lo + 1, bool)
-    seen[values - lo] = True
+    for v in parts:
+        seen[v - lo if lo else v] = True
     return np.flatnonzero(seen) + lo
+
+
+def _ranks(lanes: np.ndarray):
+    """For ascending distinct non-negative ``lanes``: a function giving each of an array of them its position
+    (``np.searchsorted(lanes, values)``), by a table over their range where that is small."""
+    if not len(lanes) or int(lanes[-1]) > 8 * len(lanes):
+        return lambda values: np.searchsorted(lanes, values)
+    table = np.zeros(int(lanes[-1]) + 1, np.int64)
+    table[lanes] = np.arange(len(lanes), dtype=np.int64)
+    return lambda values: table[values]
 
 
 def rmw_threads(source, work: Workload) -> tuple[int, int]:
@@ -421,8 +442,7 @@ def rmw_threads(source, work: Workload) -> tuple[int, int]:
     elif isinstance(source, Program):
         threads = _rmw_readers(source)
     else:
-        parts = [g.thread_ids() for g in source.groups if g.op == "rmw_read"]
-        threads = np.concatenate(parts) if parts else np.zeros(0, np.int64)
+        threads = [g.thread_ids() for g in source.groups if g.op == "rmw_read"]
     threads = _distinct(threads)
     return len(threads), len(_distinct(work.frag_pixel[threads])) if len(threads) else 0
 
@@ -484,17 +504,16 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=
 
 
 def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, program: Program | None = None,
-                pieces: list | None = None, census: Census | None = None) -> np.ndarray | None:
+                census: Census | None = None) -> np.ndarray | None:
     """The run's coalesced memory traffic (:func:`memory_bytes`, (passes, partitions)) in those of its passes
     ``passes`` (all by default) whose fragment threads a replicate packs into warps of its own (the graphics
     pipeline's fragment shaders, ``thread_mapping`` "fragment"); NaN in the others, whose samples keep the
     run's warps (a software rasterizer's triangle blocks, threads that fill warps in order) and coalesce as it
     does. From ``program``, the run's (or those passes') lowering where it is at hand (the L2's warming), else
-    by lowering each stretch of such passes, from ``pieces`` (:func:`plan_pieces` of ``passes``) where they are
-    at hand: in a pass of enough warps, from a sample of the run's own warps (:func:`_traffic_warps`,
-    ``sample.traffic_share``), each partition's bytes the run's memory load on it times the sample's coalesced
-    bytes per unit of its load there (``census``, the run's census of ``passes``, gives the run's load where it
-    is at hand). None where there are none."""
+    by lowering each stretch of such passes: in a pass of enough warps, a sample of the run's own warps
+    (:func:`_traffic_warps`, ``sample.traffic_share``), each partition's bytes the run's memory load on it
+    times the sample's coalesced bytes per unit of its load there (the run's load from ``census``, the run's
+    census of ``passes``, counted here where it is not at hand). None where there are none."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     fragment = np.array([thread_mapping(gpu, pk) == "fragment" for pk in work.plan.passes[first:end]], bool)
     if not fragment.any():
@@ -505,14 +524,17 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
         return out
     edges = np.flatnonzero(np.diff(np.concatenate(([0], fragment.astype(np.int8), [0]))))
     for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):      # each stretch [a, b) of fragment passes
-        mine = (plan_pieces(work, (first + a, first + b)) if pieces is None else
-                Pieces(dataclasses.replace(pc, pass_index=pc.pass_index - a) for pc in pieces if a <= pc.pass_index < b))
+        stretch = (first + a, first + b)
         warps = scale = None
         if gpu.sample.traffic_share < 1 and gpu.raster.warp_packing == "submission":
-            load = (None if census is None or "memory" not in census.every else
-                    census.every["memory"].reshape(-1, gpu.memory.partitions)[a:b])
-            mine, warps, scale = _traffic_warps(work, gpu, mine, first + a, b - a, load)
-        got = memory_bytes(lower(work, gpu, passes=(first + a, first + b), pieces=mine, warps=warps), gpu)
+            counted = census if census is not None else census_of(work, gpu, stretch)
+            load = counted.every.get("memory")
+            load = (None if load is None else
+                    load.reshape(-1, gpu.memory.partitions)[stretch[0] - counted.p_first:stretch[1] - counted.p_first])
+            mine, warps, scale = _traffic_warps(work, gpu, stretch, load)
+        else:
+            mine = plan_pieces(work, stretch)
+        got = memory_bytes(lower(work, gpu, passes=stretch, pieces=mine, warps=warps), gpu)
         out[a:b] = got if scale is None else got * scale
     return out
 
@@ -524,66 +546,61 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
 MIN_TRAFFIC_WARPS = 2048
 
 
-def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load: np.ndarray | None = None
+def _traffic_warps(work: Workload, gpu, stretch: tuple[int, int], load: np.ndarray | None
                    ) -> tuple[Pieces, object, np.ndarray]:
-    """The run's traffic sample of the ``pieces`` of ``n_pass`` fragment passes from the plan's ``p0``: in each pass
-    of enough warps (and no scoreboard, which packs its own), one of the run's warps at random in each block of
-    ``round(1 / sample.traffic_share)`` consecutive ones (none where that is 1), whole (their bytes are the run's
-    own). (The pieces of those warps' rows, every row of the other passes; the ``warps``
-    :func:`gpusim.hw.lower.lower` keeps them in; per pass and partition, the run's memory load on it (``load``,
-    where the census has counted it) over the sample's, 1 where the pass is left whole.) Each partition is
-    scaled by its own ratio: one ratio for the pass (its coalescing taken to be the same on every partition)
-    put the stencil-routed A-buffer's partitions up to 9% off on 32x32 pixels, whose stencil and sample arrays,
-    which coalesce differently, lie on the partitions in different mixes (its cycles 7.6% short)."""
+    """The run's traffic sample of the fragment passes ``stretch`` (the plan's ``stretch[0]`` to
+    ``stretch[1] - 1``): in each pass of enough warps (and no scoreboard, which packs its own), one of the run's
+    warps at random in each block of ``round(1 / sample.traffic_share)`` consecutive ones (none where that is
+    1), whole (their bytes are the run's own). (The pieces of those warps' rows, made for them alone, and every
+    row of the other passes; the ``warps`` :func:`gpusim.hw.lower.lower` keeps them in; per pass and
+    partition, the run's memory load on it (``load``, from the census) over the sample's, 1 where the pass is
+    left whole.) Each partition is scaled by its own ratio: one ratio for the pass (its coalescing taken to be
+    the same on every partition) put the stencil-routed A-buffer's partitions up to 9% off on 32x32 pixels,
+    whose stencil and sample arrays, which coalesce differently, lie on the partitions in different mixes
+    (its cycles 7.6% short)."""
     c = gpu.sample
     stride = max(1, round(1 / c.traffic_share))
     parts = gpu.memory.partitions
-    ops = [g.op for g in work.plan.groups]
-    masks: list = [None] * len(pieces)
-    scale = np.ones((n_pass, parts))
+    p0, n_pass = stretch[0], stretch[1] - stretch[0]
+    keep: dict[int, np.ndarray] = {}           # pass (of the stretch) -> whether each thread is in the sample
     chosen: dict[int, np.ndarray] = {}
-    for p, js in ([] if stride == 1 else split_by(np.array([pc.pass_index for pc in pieces], np.int64))):
-        ps = [pieces[j] for j in js]
-        if any(work.plan.groups[pc.group].op == "scoreboard" for pc in ps):
+    groups = pass_threads(work.plan, *stretch) if stride > 1 else {}
+    for p, found in groups.items():
+        if any(op == "scoreboard" for op, _ in found):
             continue
-        lanes = _distinct(np.concatenate([pc.thread for pc in ps]))
+        lanes = _distinct([t for _, t in found])
         warp, _ = submission_warps(work, gpu, lanes)
         if int(warp[-1]) + 1 < MIN_TRAFFIC_WARPS * stride:
             continue
         # one warp at random of each block of stride consecutive ones: spread over the pass as systematic
         # sampling is, without its period (one in every stride picked the same memory partitions' addresses)
-        pick = np.random.default_rng([c.seed, p0 + int(p)]).integers(stride, size=int(warp[-1]) // stride + 1)
+        pick = np.random.default_rng([c.seed, p]).integers(stride, size=int(warp[-1]) // stride + 1)
         kept = warp % stride == pick[warp // stride]
-        keep = np.zeros(int(lanes[-1]) + 1, bool)
-        keep[lanes[kept]] = True
-        total = np.zeros(parts) if load is None else load[p]
-        sampled = np.zeros(parts)
-        mine = [keep[pieces[j].thread] for j in js]
-        for j, m in zip(js, mine):
-            pc = pieces[j]
-            if pc.instructions is not None:
-                continue
-            if load is None:
-                got = memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
-                if got is not None:
-                    total += np.bincount(got[0], weights=got[1], minlength=parts)
-            if m.any():
-                got = memory_load(ops[pc.group], pc.address[m], pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[m],
-                                  gpu)
-                if got is not None:
-                    sampled += np.bincount(got[0], weights=got[1], minlength=parts)
-        if ((total > 0) & (sampled <= 0)).any():     # a partition the sample does not reach: the pass whole
-            continue
-        for j, m in zip(js, mine):
-            masks[j] = m
-        scale[p] = np.where(total > 0, total / np.where(sampled > 0, sampled, 1.0), 1.0)
-        chosen[int(p)] = warp[kept] // stride
-    out = Pieces()
-    for pc, m in zip(pieces, masks):
-        if m is None or m.all():
-            out.append(pc)
-        elif m.any():
-            out.append(pc.take(np.flatnonzero(m)))
+        mask = np.zeros(int(lanes[-1]) + 1, bool)
+        mask[lanes[kept]] = True
+        keep[p - p0], chosen[p - p0] = mask, warp[kept] // stride
+    pieces = plan_pieces(work, stretch, _kept_rows(keep, p0) if keep else None)
+    scale = np.ones((n_pass, parts))
+    sampled = np.zeros((n_pass, parts))
+    ops = [g.op for g in work.plan.groups]
+    for pc in pieces:
+        if pc.instructions is None and pc.pass_index in keep:
+            got = memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
+            if got is not None:
+                sampled[pc.pass_index] += unit_load(got[0], got[1], parts)
+    whole = []
+    for p in list(keep):
+        total = load[p] if load is not None else np.zeros(parts)
+        if ((total > 0) & (sampled[p] <= 0)).any():     # a partition the sample does not reach: the pass whole
+            whole.append(p)
+            del keep[p], chosen[p]
+        else:
+            scale[p] = np.where(total > 0, total / np.where(sampled[p] > 0, sampled[p], 1.0), 1.0)
+    if whole:
+        again = plan_pieces(work, stretch, _kept_rows({p: None for p in whole}, p0))
+        merged = sorted([pc for pc in pieces if pc.pass_index not in whole] + list(again),
+                        key=lambda pc: (pc.group, pc.pass_index))
+        pieces = Pieces(merged)
 
     def warps(p: int, lane_keys: np.ndarray) -> np.ndarray | None:
         got = chosen.get(p)
@@ -591,7 +608,31 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
             raise RuntimeError(f"traffic sample of pass {p0 + p}: {len(got)} warps chosen for {len(lane_keys)} lanes")
         return got
 
-    return out, warps, scale
+    return pieces, warps, scale
+
+
+def _kept_rows(keep: dict, p0: int):
+    """:func:`gpusim.hw.lower.plan_pieces`' ``keep_rows`` of a traffic sample: the rows of the threads ``keep``
+    marks in its passes (numbered from the plan's ``p0``), every row of the others; where a pass's mask is None,
+    only that pass's rows, all of them (a pass taken whole after all)."""
+    only = any(m is None for m in keep.values())
+
+    def rows(pass_of, threads, lane):
+        if np.isscalar(pass_of):
+            m = keep.get(int(pass_of) - p0, False) if only else keep.get(int(pass_of) - p0)
+            if m is None or m is True:
+                return None
+            if m is False:
+                return np.zeros(len(lane), bool)
+            return m[threads[lane]]
+        out = np.full(len(lane), not only)
+        for p, js in split_by(np.asarray(pass_of, np.int64) - p0):
+            if p in keep:
+                m = keep[p]
+                out[js] = True if m is None else m[threads[lane[js]]]
+        return out
+
+    return rows
 
 
 def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
@@ -685,20 +726,26 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
     return out
 
 
-def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None):
+def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None, every: bool = False):
     """:func:`gpusim.hw.lower.plan_pieces` of the run (of its passes ``passes``) for its replicates: (only the rows
-    some replicate may keep (:meth:`Replicates.candidate_rows`), a census of every operation, the pieces of every
-    row); the pieces of every row twice, and no census, where a replicate is the run. The run's pieces are made
-    once, for the census, the candidates and the run's own lowering (its traffic, the L2's warming)."""
-    every = plan_pieces(work, passes)
+    some replicate may keep (:meth:`Replicates.candidate_rows`), a census of every operation, and the pieces
+    of every row where ``every`` asks for them, else None); the pieces of every row twice, and no census,
+    where a replicate is the run. The census is counted a slice of rows at a time
+    (:func:`gpusim.hw.lower.census_of`), or from the pieces of every row where they are made anyway (the run's
+    own lowering: the L2's warming)."""
     if reps.share >= 1:
-        return every, None, every
+        whole = plan_pieces(work, passes)
+        return whole, None, whole
+    if not every:
+        census = census_of(work, gpu, passes)
+        return _candidate_pieces(work, reps, passes, census=census), census, None
+    whole = plan_pieces(work, passes)
     first = passes[0] if passes is not None else 0
     census = Census(work.plan, gpu, passes)
-    for pc in every:
+    for pc in whole:
         if pc.instructions is None:
             census.add(work.plan.groups[pc.group].op, pc.pass_index + first, pc.address, pc.nbytes)
-    return _candidate_pieces(work, reps, passes, every, census), census, every
+    return _candidate_pieces(work, reps, passes, whole, census), census, whole
 
 
 def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, every: list | None = None,
@@ -706,14 +753,17 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     """The pieces of the rows some replicate may keep (:meth:`Replicates.candidate_rows`), and every row of a
     graphics or software-rasterizer pass in which a replicate holds none: :class:`Keep` gives that replicate
     one unit of the pass's, drawn from all of its rows (as from the pieces of every row). Taken from ``every``,
-    the pieces of every row (a replicate keeps or leaves a thread whole, so a kept row's iteration is the one it
-    has there), with ``census``, the census of every operation, for the samples' lowering; without ``every``,
-    made for those rows alone without their addresses, to count what each sample keeps."""
+    the pieces of every row, where they are at hand (a replicate keeps or leaves a thread whole, so a kept
+    row's iteration is the one it has there), else made for those rows alone; with ``census``, the census of
+    every operation, for the samples' lowering; without it, without their addresses, to count what each
+    sample keeps."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     reps.seen[first:end] = 0
     totals = pass_operations(work.plan)[first:end]
+    addresses = census is not None
     if every is None:
-        pieces = plan_pieces(work, passes, reps.candidate_rows, addresses=False)
+        pieces = plan_pieces(work, passes, reps.candidate_rows, addresses=addresses)
+        pieces.census = census
     else:
         pieces = Pieces()
         for pc in every:
@@ -735,7 +785,7 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     if every is None:
         extra = plan_pieces(work, passes, lambda pass_of, threads, lane: (
             None if np.isscalar(pass_of) and whole[int(pass_of)]
-            else np.broadcast_to(whole[pass_of], np.shape(lane))), addresses=False)
+            else np.broadcast_to(whole[pass_of], np.shape(lane))), addresses=addresses)
     else:
         extra = [pc for pc in every if whole[pc.pass_index + first]]
     merged = sorted([pc for pc in pieces if not whole[pc.pass_index + first]] + list(extra),
@@ -811,11 +861,11 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     pieces = outcomes = run_bytes = None
     members, count, work_checks = _members_of(reps, gpu)
     if chunks is None:
-        pieces, _, every = _pieces(work, gpu, reps, None)
         warm = share < 1 and gpu.l2.size_bytes and "l2" in gpu.memory.levels
+        pieces, census, every = _pieces(work, gpu, reps, None, every=bool(warm))
         run = lower(work, gpu, pieces=every) if warm else None    # the run's L2 outcomes (warming)
         outcomes = Outcomes(run, gpu) if warm else None
-        run_bytes = (run_traffic(work, gpu, None, run, every, pieces.census)
+        run_bytes = (run_traffic(work, gpu, None, run, census)
                      if share < 1 and gpu.sample.run_traffic else None)
         del run, every
     if chunks is None:
@@ -848,10 +898,9 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         readers: list[list] = [[] for _ in members]
         thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
-            pieces, _, every = _pieces(work, gpu, reps, (first, end))
-            run_bytes = (run_traffic(work, gpu, (first, end), pieces=every, census=pieces.census)
+            pieces, census, _ = _pieces(work, gpu, reps, (first, end))
+            run_bytes = (run_traffic(work, gpu, (first, end), census=census)
                          if reps.share < 1 and gpu.sample.run_traffic else None)
-            del every
             for i, (r, _) in enumerate(members):
                 machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
                                                              sms=fit[i], run_bytes=run_bytes)

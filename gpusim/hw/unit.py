@@ -36,6 +36,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from gpusim.jit import compiled_once
+
 FP = 1 << 16          # sub-cycles per cycle
 
 
@@ -85,12 +87,39 @@ def interleave(address, granularity: int, instances: int):
     if address.ndim != 1 or len(address) <= _CHUNK:
         return _interleave(address, granularity, instances)
     out = np.empty(len(address), np.result_type(address.dtype, np.int64))
+    kernel = compiled_once(_KERNEL, _interleave_into) if address.dtype.kind in "iu" else None
+    if kernel is not None:                           # one pass, no temporaries: the same integers
+        kernel(address, granularity, instances, _shift(granularity), _shift(instances), out)
+        return out
     for lo in range(0, len(address), _CHUNK):       # temporaries the allocator reuses (and the cache holds)
         out[lo:lo + _CHUNK] = _interleave(address[lo:lo + _CHUNK], granularity, instances)
     return out
 
 
 _CHUNK = 1 << 18
+_KERNEL: list = []     # [the compiled _interleave_into, or None], made on first use
+
+
+def _shift(d: int) -> int:
+    """log2 of ``d`` where it is a power of two, else -1."""
+    return d.bit_length() - 1 if d & (d - 1) == 0 else -1
+
+
+def _interleave_into(address, granularity, instances, g_shift, n_shift, out):
+    """:func:`_interleave` of each of ``address`` (non-negative integers) into ``out``, compiled (shifts and
+    masks for powers of two, ``g_shift``/``n_shift`` >= 0, as :func:`div` and :func:`mod` take them)."""
+    mask = instances - 1
+    for i in range(len(address)):
+        a = address[i]
+        b = a >> g_shift if g_shift >= 0 else a // granularity
+        if n_shift >= 0:
+            q = b >> n_shift
+            q2 = q >> n_shift
+            out[i] = (b + q + q2 + (q2 >> n_shift)) & mask
+        else:
+            q = b // instances
+            q2 = q // instances
+            out[i] = (b + q + q2 + q2 // instances) % instances
 
 
 def _interleave(address, granularity: int, instances: int):

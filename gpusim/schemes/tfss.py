@@ -159,9 +159,10 @@ class TFSS(Scheme):
         # capture (Figure 3-8), each stored fragment in program order; first its colour compressed
         if lze != "off":
             plan.compute(1, cand, LEADING_ZEROS)
-        plan.add(1, "load", "ssa_table", kept, 1, lambda i, s: pix[kept[i]] * SA, SA, dep=True)
+        kept_pix = pix[kept]
+        plan.add(1, "load", "ssa_table", kept, 1, lambda i, s: kept_pix[i] * SA, SA, dep=True)
         plan.add(1, "load", "nsa_table", kept, kept_chain,
-                 lambda i, s: at.section(pix[kept[i]], s) * SA, SA, dep=True)
+                 lambda i, s: at.section(kept_pix[i], s) * SA, SA, dep=True)
         # the i-th section allocated is section i
         plan.add(1, "store", "nsa_table", openers, 1, lambda i, s: i * SA, SA, dep=True)
         plan.add(1, "store", "ssa_table", first, 1, lambda i, s: pix[first[i]] * SA, SA, dep=True)

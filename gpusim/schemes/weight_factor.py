@@ -85,8 +85,9 @@ class WeightFactor(Scheme):
         sec_of[kept] = section(pix[kept], pl.chain[kept])
         m_off = sec_of * M + pl.slot * FB
 
+        kept_pix = pix[kept]
         plan.add(1, "load", "pointer_memory", kept, pl.chain[kept],
-                 lambda i, s: section(pix[kept[i]], s) * SA, SA, dep=True)
+                 lambda i, s: section(kept_pix[i], s) * SA, SA, dep=True)
         plan.add(1, "store", "pointer_memory", dynamic, 1, lambda i, s: sec_of[dynamic[i]] * SA, SA, dep=True)
         plan.add(1, "store", "pointer_memory", dynamic, 1,
                  lambda i, s: section(pix[dynamic[i]], pl.chain[dynamic[i]] - 1) * SA, SA, dep=True)
