@@ -155,7 +155,7 @@ def test_a_replicate_is_thinned_only_where_it_keeps_enough_tiles():
     assert thinning(gpu, 1000, 1) == pytest.approx(16 / (1000 / 30))      # raised to keep 16 tiles: 0.48
     assert thinning(gpu, 900, 1) == 1.0                  # 0.53: over 0.5, the work check would cost the gain
     assert thinning(gpu, 2304, 30) == 1.0                # the replicate is the run
-    assert thinning(load_gpu("gtx280"), 2304, 1) < 1     # on by default
+    assert thinning(load_gpu("gtx280"), 2304, 1) == 0.25  # on by default
     assert thinning(load_gpu("gtx280", ["sample.thin=1"]), 2304, 1) == 1.0   # off
     # a software rasterizer's run samples triangle blocks too, and keeps as many of them: 188 blocks are 6.3 an SM
     assert thinning(gpu, 2304, 1, blocks=188) == 1.0

@@ -76,7 +76,8 @@ class SampleConfig:
                         "work, the interval's degrees of freedom counting their slope's one (Welch-Satterthwaite); "
                         "shares over 0.5 thin nothing; 1: off", gt=0, max=1)
     thin_min_tiles: int = param(16, unit="tiles", doc="screen tiles with fragments a thinned replicate keeps at "
-                                "least: the share it keeps is raised to keep them", min=1)
+                                "least (and as many triangle blocks, where a software rasterizer's passes sample "
+                                "them): the share it keeps is raised to keep them", min=1)
     seed: int = param(1, doc="random seed of the samples", min=0)
     scale_check: bool = param(True, doc="also run replicates 0 and 1's samples together on their SMs together "
                               "and widen the 95% interval by the bias of a replicate's machine size this gives "

@@ -68,7 +68,9 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   overshoots the error, and the corrected figures were further off). The corpus (configs/experiments/fidelity.toml) measures how
   often the interval holds the full level's cycles.
 * Thinning (``sample.thin`` below 1; 0.25 by default). A replicate keeps only
-  that share of its SMs' share of the tiles (:func:`thinning`) and stands for
+  that share of its SMs' share of the tiles (:func:`thinning`: raised to keep
+  ``sample.thin_min_tiles`` tiles, as many triangle blocks in a software
+  rasterizer's run) and stands for
   the whole GPU on a frame thinned to it (:func:`thinned`: the rest of the GPU's
   load on the shared units, the atomic chains and the front end at the share
   each pass keeps). A pass's cycles are taken to grow linearly with its work,
@@ -163,8 +165,8 @@ def thinning(gpu, tiles: int, sms: int, blocks: int | None = None) -> float:
     screen tiles (and, where a software rasterizer's passes sample triangle blocks, of ``blocks`` such
     blocks): ``sample.thin``, raised until the replicate keeps ``sample.thin_min_tiles`` tiles (and as many
     triangle blocks: a replicate of fewer holds little more than the largest triangle's block, which every
-    replicate holds, so their spread shows nothing of its error); 1 (no thinning) where that is over 0.5
-    (the work checks, at twice the share, would cost about what it saves) or the replicate is the run."""
+    replicate holds, so their spread shows nothing of its error); 1 (no thinning) where that is over 0.5 (the
+    work checks, at twice the share, would cost about what it saves) or the replicate is the run."""
     c = gpu.sample
     units = tiles if blocks is None else min(tiles, blocks)
     if c.thin >= 1 or sms >= gpu.core.sms or not units:
