@@ -466,6 +466,7 @@ def _same_piece(a, b, addresses: bool = True) -> bool:
     ("freepipe-mdts", {}),                             # triangle blocks, atomic chains (the census's words)
     ("kbuffer", {"k": 8, "order": "centroid", "batch": 16}),
     ("tfss", {}),
+    ("r-buffer", {}),          # its reads' addresses rank each among all of a pass's (the FIFO sequence)
 ])
 def test_pieces_of_the_candidate_rows_lower_the_same_samples(scheme, params):
     """The sampled level builds the pieces of the rows some replicate may keep (every row of a pass in which
@@ -570,3 +571,18 @@ def test_the_runs_traffic_is_estimated_from_a_sample_of_its_own_warps(spheres, m
     assert np.isin(lanes[np.isin(run_warp, chosen)], mine).all()        # whole warps
     assert np.array_equal(warps(0, mine), run_warp[np.isin(lanes, mine)] // 4)
     assert (3 < scale).all() and (scale < 5).all()       # the run's load on each partition over the quarter's
+
+
+def test_kept_rows_keep_the_addresses_every_row_gives():
+    """A group's offsets may rank a row among all of a pass's (the R-buffer's reads: their FIFO sequence), so
+    plan_pieces makes every row's address before it keeps some: the kept rows' addresses are those of the
+    pieces of every row."""
+    from gpusim.schemes import make_scheme
+    trace = trace_scene(*load_scene("nested-spheres", ["screen.width=48", "screen.height=48"]), progress=False)
+    work = Workload.of(make_scheme("r-buffer", {}).run(trace), trace)
+    every = plan_pieces(work)
+    odd = plan_pieces(work, keep_rows=lambda pass_of, threads, lane: threads[lane] % 2 == 1)
+    for pc in every:
+        got = [q for q in odd if (q.group, q.pass_index) == (pc.group, pc.pass_index)]
+        mine = pc.thread % 2 == 1
+        assert (len(got) == 1 and np.array_equal(got[0].address, pc.address[mine])) or (not got and not mine.any())

@@ -209,20 +209,24 @@ def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | N
     if not len(i):
         return []
     single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
-    pass_of = g.pass_of(i, seq)
-    rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
-    if rows is not None and not rows.all():      # the kept rows, before their addresses are made
-        sel = np.flatnonzero(rows)
-        if not len(sel):
-            return []
-        i, seq = i[sel], seq[sel]
-        pass_of = pass_of if np.isscalar(pass_of) else pass_of[sel]
     instr = np.asarray(g.instructions)[i] if g.is_compute else None
+    # addresses of every row of the passes, then the kept ones: a group's offsets may rank its rows among all
+    # of a pass's (the R-buffer's FIFO sequence), so they are not made for a subset
     if addresses:
         addr = np.asarray(g.offset(i, seq), np.int64) + (0 if g.is_compute else bases[g.structure])
         nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
     else:
         addr, nbytes = np.broadcast_to(np.int64(0), (len(i),)), 0
+    pass_of = g.pass_of(i, seq)
+    rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
+    if rows is not None and not rows.all():
+        sel = np.flatnonzero(rows)
+        if not len(sel):
+            return []
+        i, seq, addr = i[sel], seq[sel], addr[sel]
+        nbytes = nbytes if np.isscalar(nbytes) else nbytes[sel]
+        instr = None if instr is None else instr[sel]
+        pass_of = pass_of if np.isscalar(pass_of) else pass_of[sel]
     whole = single and len(i) == n                 # every thread's one operation, in thread order
     if np.isscalar(pass_of):
         return [_Piece(gi, int(pass_of), threads if whole else threads[i], None if single else seq, addr, nbytes,
@@ -304,17 +308,17 @@ def pass_threads(plan: OpPlan, lo: int, hi: int) -> dict[int, list[tuple[str, np
     return out
 
 
-def census_of(work: Workload, gpu, passes: tuple[int, int] | None = None, rows: int = 1 << 20) -> Census:
-    """The :class:`Census` of every memory operation of the run (of its passes ``passes``), counted a slice of
-    ``rows`` of a group's operations at a time, without the pieces of every row: those hold every row's
-    thread, iteration and address at once, which cost the sampled level more than the counting does."""
+def census_of(work: Workload, gpu, passes: tuple[int, int] | None = None) -> Census:
+    """The :class:`Census` of every memory operation of the run (of its passes ``passes``), counted a group at a
+    time, without the pieces of every row: those hold every row's thread, iteration and address at once, which
+    cost the sampled level more than the counting does. A group's addresses are made for all of its rows in
+    those passes at once (its offsets may rank a row among a pass's: the R-buffer's FIFO sequence)."""
     census = Census(work.plan, gpu, passes)
     for g in work.plan.memory_groups:
         i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
-        for lo in range(0, len(i), rows):
-            ii, ss = i[lo:lo + rows], seq[lo:lo + rows]
-            nbytes = np.asarray(g.bytes(ii, ss), np.int32) if callable(g.bytes) else int(g.bytes)
-            census.add(g.op, g.pass_of(ii, ss), np.asarray(g.offset(ii, ss), np.int64) + work.bases[g.structure],
+        if len(i):
+            nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
+            census.add(g.op, g.pass_of(i, seq), np.asarray(g.offset(i, seq), np.int64) + work.bases[g.structure],
                        nbytes)
     return census
 
