@@ -481,23 +481,17 @@ def test_pieces_of_the_candidate_rows_lower_the_same_samples(scheme, params):
     reps, again = Replicates(work, gpu), Replicates(work, gpu)      # one design (a Replicates caches units)
     every = plan_pieces(work)
     some, census, whole = sample._pieces(work, gpu, again, None)
-    assert whole is None                   # not asked for: the candidates made alone, the census a slice at a time
     assert sum(len(pc.thread) for pc in some) < sum(len(pc.thread) for pc in every)
-    # taken from the run's pieces (made once, where the L2's warming lowers them), the candidates are the rows
-    # made alone, and the census counts what the pieces of every row load and their atomic words
-    from_every, census_every, whole = sample._pieces(work, gpu, Replicates(work, gpu), None, every=True)
+    # taken from the run's pieces (made once), the candidates are the rows made alone (for counting, without
+    # addresses) and the census counts what the pieces of every row load and their atomic words
     assert len(whole) == len(every) and all(_same_piece(a, b) for a, b in zip(whole, every))
-    assert len(from_every) == len(some) and all(_same_piece(a, b) for a, b in zip(from_every, some))
-    made = sample._candidate_pieces(work, Replicates(work, gpu), None)       # for counting: without addresses
+    made = sample._candidate_pieces(work, Replicates(work, gpu), None)
     assert len(made) == len(some) and all(_same_piece(a, b, addresses=False) for a, b in zip(made, some))
     loads = _run_loads(plan_pieces(work), work.plan, gpu, len(work.plan.passes))["every"]
-    words = _run_words(plan_pieces(work), work.plan) or (None, None)
-    for counted in (census, census_every):
-        assert counted.every.keys() == loads.keys()
-        assert all(np.array_equal(counted.every[k], loads[k]) for k in loads)
-        w = counted.word_ops() or (None, None)
-        assert all(np.array_equal(a, b) for a, b in zip(w, words) if a is not None)
-        assert (w[0] is None) == (words[0] is None)
+    assert census.every.keys() == loads.keys()
+    assert all(np.array_equal(census.every[k], loads[k]) for k in loads)
+    w, v = census.word_ops() or (None, None), _run_words(plan_pieces(work), work.plan) or (None, None)
+    assert all(np.array_equal(a, b) for a, b in zip(w, v) if a is not None) and (w[0] is None) == (v[0] is None)
     small = scaled_gpu(gpu, reps.sms)
     for r in range(reps.count):
         a = lower(work, small, Keep(reps, r), pieces=every)
@@ -556,12 +550,12 @@ def test_the_runs_traffic_is_estimated_from_a_sample_of_its_own_warps(spheres, m
     for pc in every:
         if pc.instructions is None:
             census.add(work.plan.groups[pc.group].op, pc.pass_index, pc.address, pc.nbytes)
-    assert np.allclose(run_traffic(work, gpu, None, None, census)[capture], got, rtol=1e-12)
+    assert np.allclose(run_traffic(work, gpu, None, None, every, census)[capture], got, rtol=1e-12)
     # the sample: a quarter of the pass's warps, one of each block of 4, each whole (all of its lanes)
     pieces = sample.Pieces(pc for pc in plan_pieces(work) if pc.pass_index == capture)
-    load = census.every["memory"].reshape(len(work.plan.passes), -1)[capture:capture + 1]
-    kept, warps, scale = sample._traffic_warps(work, gpu, (capture, capture + 1), load)
-    assert {pc.pass_index for pc in kept} == {0}
+    for pc in pieces:
+        pc.pass_index = 0
+    kept, warps, scale = sample._traffic_warps(work, gpu, pieces, capture, 1)
     lanes = np.unique(np.concatenate([pc.thread for pc in pieces]))
     mine = np.unique(np.concatenate([pc.thread for pc in kept]))
     run_warp = submission_warps(work, gpu, lanes)[0]

@@ -284,45 +284,6 @@ class Census:
         return np.unique(np.concatenate(self.words), return_counts=True) if self.words else None
 
 
-def pass_threads(plan: OpPlan, lo: int, hi: int) -> dict[int, list[tuple[str, np.ndarray]]]:
-    """Per pass ``lo`` to ``hi - 1`` (the plan's numbers) that holds operations: each group's (operation, threads
-    with an operation in it), from the groups' threads and counts, without expanding their operations
-    where the group says where its passes fall (a pass of its own, ``seq_pass``, a pass per thread)."""
-    out: dict[int, list] = {}
-    for g in plan.groups:
-        tid, count = g.thread_ids(), g.count
-        if g.seq_pass is not None:          # op s of every thread with more than s of them, in seq_pass[s]
-            found = [(int(p), tid[count > s]) for s, p in enumerate(g.seq_pass.tolist()) if lo <= p < hi]
-        elif g.pass_fn is None and np.isscalar(g.pass_index):
-            p = int(g.pass_index)
-            found = [(p, tid if len(count) and int(count.min()) > 0 else tid[count > 0])] if lo <= p < hi else []
-        elif g.pass_fn is None:
-            sel = np.flatnonzero((g.pass_index >= lo) & (g.pass_index < hi) & (count > 0))
-            found = [(p, tid[sel[js]]) for p, js in split_by(np.asarray(g.pass_index, np.int64)[sel])]
-        else:
-            i, seq = ops_in_passes(g, lo, hi)
-            found = [(p, np.unique(tid[i[js]])) for p, js in split_by(np.asarray(g.pass_of(i, seq), np.int64))]
-        for p, t in found:
-            if len(t):
-                out.setdefault(p, []).append((g.op, t))
-    return out
-
-
-def census_of(work: Workload, gpu, passes: tuple[int, int] | None = None) -> Census:
-    """The :class:`Census` of every memory operation of the run (of its passes ``passes``), counted a group at a
-    time, without the pieces of every row: those hold every row's thread, iteration and address at once, which
-    cost the sampled level more than the counting does. A group's addresses are made for all of its rows in
-    those passes at once (its offsets may rank a row among a pass's: the R-buffer's FIFO sequence)."""
-    census = Census(work.plan, gpu, passes)
-    for g in work.plan.memory_groups:
-        i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
-        if len(i):
-            nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
-            census.add(g.op, g.pass_of(i, seq), np.asarray(g.offset(i, seq), np.int64) + work.bases[g.structure],
-                       nbytes)
-    return census
-
-
 def share_pieces(pieces: Pieces, plan: OpPlan, gpu, n_pass: int) -> None:
     """Count what the samples of ``pieces`` (of a program of ``n_pass`` passes) share (:class:`Pieces`) now,
     before samples are lowered in processes of their own (each would count it again)."""

@@ -97,9 +97,8 @@ import time
 
 import numpy as np
 
-from gpusim.hw.lower import (Census, Pieces, Workload, census_of, lower, memory_load, pass_operations, pass_threads,
-                             plan_pieces, sample_masks, share_pieces, split_by, submission_warps, thread_mapping,
-                             unit_load)
+from gpusim.hw.lower import (Census, Pieces, Workload, lower, memory_load, pass_operations, plan_pieces,
+                             sample_masks, share_pieces, split_by, submission_warps, thread_mapping, unit_load)
 from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.memory.warming import Outcomes
 from gpusim.hw.parallel import fork_map, fork_workers
@@ -506,16 +505,17 @@ def _replicate_program(work: Workload, gpu, reps: Replicates, r, pieces, passes=
 
 
 def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, program: Program | None = None,
-                census: Census | None = None) -> np.ndarray | None:
+                pieces: list | None = None, census: Census | None = None) -> np.ndarray | None:
     """The run's coalesced memory traffic (:func:`memory_bytes`, (passes, partitions)) in those of its passes
     ``passes`` (all by default) whose fragment threads a replicate packs into warps of its own (the graphics
     pipeline's fragment shaders, ``thread_mapping`` "fragment"); NaN in the others, whose samples keep the
     run's warps (a software rasterizer's triangle blocks, threads that fill warps in order) and coalesce as it
     does. From ``program``, the run's (or those passes') lowering where it is at hand (the L2's warming), else
-    by lowering each stretch of such passes: in a pass of enough warps, a sample of the run's own warps
-    (:func:`_traffic_warps`, ``sample.traffic_share``), each partition's bytes the run's memory load on it
-    times the sample's coalesced bytes per unit of its load there (the run's load from ``census``, the run's
-    census of ``passes``, counted here where it is not at hand). None where there are none."""
+    by lowering each stretch of such passes, from ``pieces`` (:func:`plan_pieces` of ``passes``) where they are
+    at hand: in a pass of enough warps, from a sample of the run's own warps (:func:`_traffic_warps`,
+    ``sample.traffic_share``), each partition's bytes the run's memory load on it times the sample's coalesced
+    bytes per unit of its load there (``census``, the run's census of ``passes``, gives the run's load where it
+    is at hand). None where there are none."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     fragment = np.array([thread_mapping(gpu, pk) == "fragment" for pk in work.plan.passes[first:end]], bool)
     if not fragment.any():
@@ -526,17 +526,14 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
         return out
     edges = np.flatnonzero(np.diff(np.concatenate(([0], fragment.astype(np.int8), [0]))))
     for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()):      # each stretch [a, b) of fragment passes
-        stretch = (first + a, first + b)
+        mine = (plan_pieces(work, (first + a, first + b)) if pieces is None else
+                Pieces(dataclasses.replace(pc, pass_index=pc.pass_index - a) for pc in pieces if a <= pc.pass_index < b))
         warps = scale = None
         if gpu.sample.traffic_share < 1 and gpu.raster.warp_packing == "submission":
-            counted = census if census is not None else census_of(work, gpu, stretch)
-            load = counted.every.get("memory")
-            load = (None if load is None else
-                    load.reshape(-1, gpu.memory.partitions)[stretch[0] - counted.p_first:stretch[1] - counted.p_first])
-            mine, warps, scale = _traffic_warps(work, gpu, stretch, load)
-        else:
-            mine = plan_pieces(work, stretch)
-        got = memory_bytes(lower(work, gpu, passes=stretch, pieces=mine, warps=warps), gpu)
+            load = (None if census is None or "memory" not in census.every else
+                    census.every["memory"].reshape(-1, gpu.memory.partitions)[a:b])
+            mine, warps, scale = _traffic_warps(work, gpu, mine, first + a, b - a, load)
+        got = memory_bytes(lower(work, gpu, passes=(first + a, first + b), pieces=mine, warps=warps), gpu)
         out[a:b] = got if scale is None else got * scale
     return out
 
@@ -548,61 +545,66 @@ def run_traffic(work: Workload, gpu, passes: tuple[int, int] | None = None, prog
 MIN_TRAFFIC_WARPS = 2048
 
 
-def _traffic_warps(work: Workload, gpu, stretch: tuple[int, int], load: np.ndarray | None
+def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load: np.ndarray | None = None
                    ) -> tuple[Pieces, object, np.ndarray]:
-    """The run's traffic sample of the fragment passes ``stretch`` (the plan's ``stretch[0]`` to
-    ``stretch[1] - 1``): in each pass of enough warps (and no scoreboard, which packs its own), one of the run's
-    warps at random in each block of ``round(1 / sample.traffic_share)`` consecutive ones (none where that is
-    1), whole (their bytes are the run's own). (The pieces of those warps' rows, made for them alone, and every
-    row of the other passes; the ``warps`` :func:`gpusim.hw.lower.lower` keeps them in; per pass and
-    partition, the run's memory load on it (``load``, from the census) over the sample's, 1 where the pass is
-    left whole.) Each partition is scaled by its own ratio: one ratio for the pass (its coalescing taken to be
-    the same on every partition) put the stencil-routed A-buffer's partitions up to 9% off on 32x32 pixels,
-    whose stencil and sample arrays, which coalesce differently, lie on the partitions in different mixes
-    (its cycles 7.6% short)."""
+    """The run's traffic sample of the ``pieces`` of ``n_pass`` fragment passes from the plan's ``p0``: in each pass
+    of enough warps (and no scoreboard, which packs its own), one of the run's warps at random in each block of
+    ``round(1 / sample.traffic_share)`` consecutive ones (none where that is 1), whole (their bytes are the run's
+    own). (The pieces of those warps' rows, every row of the other passes; the ``warps``
+    :func:`gpusim.hw.lower.lower` keeps them in; per pass and partition, the run's memory load on it (``load``,
+    where the census has counted it) over the sample's, 1 where the pass is left whole.) Each partition is
+    scaled by its own ratio: one ratio for the pass (its coalescing taken to be the same on every partition)
+    put the stencil-routed A-buffer's partitions up to 9% off on 32x32 pixels, whose stencil and sample arrays,
+    which coalesce differently, lie on the partitions in different mixes (its cycles 7.6% short)."""
     c = gpu.sample
     stride = max(1, round(1 / c.traffic_share))
     parts = gpu.memory.partitions
-    p0, n_pass = stretch[0], stretch[1] - stretch[0]
-    keep: dict[int, np.ndarray] = {}           # pass (of the stretch) -> whether each thread is in the sample
+    ops = [g.op for g in work.plan.groups]
+    masks: list = [None] * len(pieces)
+    scale = np.ones((n_pass, parts))
     chosen: dict[int, np.ndarray] = {}
-    groups = pass_threads(work.plan, *stretch) if stride > 1 else {}
-    for p, found in groups.items():
-        if any(op == "scoreboard" for op, _ in found):
+    for p, js in ([] if stride == 1 else split_by(np.array([pc.pass_index for pc in pieces], np.int64))):
+        ps = [pieces[j] for j in js]
+        if any(work.plan.groups[pc.group].op == "scoreboard" for pc in ps):
             continue
-        lanes = _distinct([t for _, t in found])
+        lanes = _distinct([pc.thread for pc in ps])
         warp, _ = submission_warps(work, gpu, lanes)
         if int(warp[-1]) + 1 < MIN_TRAFFIC_WARPS * stride:
             continue
         # one warp at random of each block of stride consecutive ones: spread over the pass as systematic
         # sampling is, without its period (one in every stride picked the same memory partitions' addresses)
-        pick = np.random.default_rng([c.seed, p]).integers(stride, size=int(warp[-1]) // stride + 1)
+        pick = np.random.default_rng([c.seed, p0 + int(p)]).integers(stride, size=int(warp[-1]) // stride + 1)
         kept = warp % stride == pick[warp // stride]
-        mask = np.zeros(int(lanes[-1]) + 1, bool)
-        mask[lanes[kept]] = True
-        keep[p - p0], chosen[p - p0] = mask, warp[kept] // stride
-    pieces = plan_pieces(work, stretch, _kept_rows(keep, p0) if keep else None)
-    scale = np.ones((n_pass, parts))
-    sampled = np.zeros((n_pass, parts))
-    ops = [g.op for g in work.plan.groups]
-    for pc in pieces:
-        if pc.instructions is None and pc.pass_index in keep:
-            got = memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
-            if got is not None:
-                sampled[pc.pass_index] += unit_load(got[0], got[1], parts)
-    whole = []
-    for p in list(keep):
-        total = load[p] if load is not None else np.zeros(parts)
-        if ((total > 0) & (sampled[p] <= 0)).any():     # a partition the sample does not reach: the pass whole
-            whole.append(p)
-            del keep[p], chosen[p]
-        else:
-            scale[p] = np.where(total > 0, total / np.where(sampled[p] > 0, sampled[p], 1.0), 1.0)
-    if whole:
-        again = plan_pieces(work, stretch, _kept_rows({p: None for p in whole}, p0))
-        merged = sorted([pc for pc in pieces if pc.pass_index not in whole] + list(again),
-                        key=lambda pc: (pc.group, pc.pass_index))
-        pieces = Pieces(merged)
+        keep = np.zeros(int(lanes[-1]) + 1, bool)
+        keep[lanes[kept]] = True
+        total = np.zeros(parts) if load is None else load[p]
+        sampled = np.zeros(parts)
+        mine = [keep[pieces[j].thread] for j in js]
+        for j, m in zip(js, mine):
+            pc = pieces[j]
+            if pc.instructions is not None:
+                continue
+            if load is None:
+                got = memory_load(ops[pc.group], pc.address, pc.nbytes, gpu)
+                if got is not None:
+                    total += unit_load(got[0], got[1], parts)
+            if m.any():
+                got = memory_load(ops[pc.group], pc.address[m], pc.nbytes if np.isscalar(pc.nbytes) else pc.nbytes[m],
+                                  gpu)
+                if got is not None:
+                    sampled += unit_load(got[0], got[1], parts)
+        if ((total > 0) & (sampled <= 0)).any():     # a partition the sample does not reach: the pass whole
+            continue
+        for j, m in zip(js, mine):
+            masks[j] = m
+        scale[p] = np.where(total > 0, total / np.where(sampled > 0, sampled, 1.0), 1.0)
+        chosen[int(p)] = warp[kept] // stride
+    out = Pieces()
+    for pc, m in zip(pieces, masks):
+        if m is None or m.all():
+            out.append(pc)
+        elif m.any():
+            out.append(pc.take(np.flatnonzero(m)))
 
     def warps(p: int, lane_keys: np.ndarray) -> np.ndarray | None:
         got = chosen.get(p)
@@ -610,31 +612,7 @@ def _traffic_warps(work: Workload, gpu, stretch: tuple[int, int], load: np.ndarr
             raise RuntimeError(f"traffic sample of pass {p0 + p}: {len(got)} warps chosen for {len(lane_keys)} lanes")
         return got
 
-    return pieces, warps, scale
-
-
-def _kept_rows(keep: dict, p0: int):
-    """:func:`gpusim.hw.lower.plan_pieces`' ``keep_rows`` of a traffic sample: the rows of the threads ``keep``
-    marks in its passes (numbered from the plan's ``p0``), every row of the others; where a pass's mask is None,
-    only that pass's rows, all of them (a pass taken whole after all)."""
-    only = any(m is None for m in keep.values())
-
-    def rows(pass_of, threads, lane):
-        if np.isscalar(pass_of):
-            m = keep.get(int(pass_of) - p0, False) if only else keep.get(int(pass_of) - p0)
-            if m is None or m is True:
-                return None
-            if m is False:
-                return np.zeros(len(lane), bool)
-            return m[threads[lane]]
-        out = np.full(len(lane), not only)
-        for p, js in split_by(np.asarray(pass_of, np.int64) - p0):
-            if p in keep:
-                m = keep[p]
-                out[js] = True if m is None else m[threads[lane[js]]]
-        return out
-
-    return rows
+    return out, warps, scale
 
 
 def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
@@ -728,26 +706,20 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
     return out
 
 
-def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None, every: bool = False):
+def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None):
     """:func:`gpusim.hw.lower.plan_pieces` of the run (of its passes ``passes``) for its replicates: (only the rows
-    some replicate may keep (:meth:`Replicates.candidate_rows`), a census of every operation, and the pieces
-    of every row where ``every`` asks for them, else None); the pieces of every row twice, and no census,
-    where a replicate is the run. The census is counted a slice of rows at a time
-    (:func:`gpusim.hw.lower.census_of`), or from the pieces of every row where they are made anyway (the run's
-    own lowering: the L2's warming)."""
+    some replicate may keep (:meth:`Replicates.candidate_rows`), a census of every operation, the pieces of every
+    row); the pieces of every row twice, and no census, where a replicate is the run. The run's pieces are made
+    once, for the census, the candidates and the run's own lowering (its traffic, the L2's warming)."""
+    every = plan_pieces(work, passes)
     if reps.share >= 1:
-        whole = plan_pieces(work, passes)
-        return whole, None, whole
-    if not every:
-        census = census_of(work, gpu, passes)
-        return _candidate_pieces(work, reps, passes, census=census), census, None
-    whole = plan_pieces(work, passes)
+        return every, None, every
     first = passes[0] if passes is not None else 0
     census = Census(work.plan, gpu, passes)
-    for pc in whole:
+    for pc in every:
         if pc.instructions is None:
             census.add(work.plan.groups[pc.group].op, pc.pass_index + first, pc.address, pc.nbytes)
-    return _candidate_pieces(work, reps, passes, whole, census), census, whole
+    return _candidate_pieces(work, reps, passes, every, census), census, every
 
 
 def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, every: list | None = None,
@@ -755,17 +727,14 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     """The pieces of the rows some replicate may keep (:meth:`Replicates.candidate_rows`), and every row of a
     graphics or software-rasterizer pass in which a replicate holds none: :class:`Keep` gives that replicate
     one unit of the pass's, drawn from all of its rows (as from the pieces of every row). Taken from ``every``,
-    the pieces of every row, where they are at hand (a replicate keeps or leaves a thread whole, so a kept
-    row's iteration is the one it has there), else made for those rows alone; with ``census``, the census of
-    every operation, for the samples' lowering; without it, without their addresses, to count what each
-    sample keeps."""
+    the pieces of every row (a replicate keeps or leaves a thread whole, so a kept row's iteration is the one it
+    has there), with ``census``, the census of every operation, for the samples' lowering; without ``every``,
+    made for those rows alone without their addresses, to count what each sample keeps."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     reps.seen[first:end] = 0
     totals = pass_operations(work.plan)[first:end]
-    addresses = census is not None
     if every is None:
-        pieces = plan_pieces(work, passes, reps.candidate_rows, addresses=addresses)
-        pieces.census = census
+        pieces = plan_pieces(work, passes, reps.candidate_rows, addresses=False)
     else:
         pieces = Pieces()
         for pc in every:
@@ -787,7 +756,7 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     if every is None:
         extra = plan_pieces(work, passes, lambda pass_of, threads, lane: (
             None if np.isscalar(pass_of) and whole[int(pass_of)]
-            else np.broadcast_to(whole[pass_of], np.shape(lane))), addresses=addresses)
+            else np.broadcast_to(whole[pass_of], np.shape(lane))), addresses=False)
     else:
         extra = [pc for pc in every if whole[pc.pass_index + first]]
     merged = sorted([pc for pc in pieces if not whole[pc.pass_index + first]] + list(extra),
@@ -863,11 +832,11 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     pieces = outcomes = run_bytes = None
     members, count, work_checks = _members_of(reps, gpu)
     if chunks is None:
+        pieces, _, every = _pieces(work, gpu, reps, None)
         warm = share < 1 and gpu.l2.size_bytes and "l2" in gpu.memory.levels
-        pieces, census, every = _pieces(work, gpu, reps, None, every=bool(warm))
         run = lower(work, gpu, pieces=every) if warm else None    # the run's L2 outcomes (warming)
         outcomes = Outcomes(run, gpu) if warm else None
-        run_bytes = (run_traffic(work, gpu, None, run, census)
+        run_bytes = (run_traffic(work, gpu, None, run, every, pieces.census)
                      if share < 1 and gpu.sample.run_traffic else None)
         del run, every
     if chunks is None:
@@ -900,9 +869,10 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         readers: list[list] = [[] for _ in members]
         thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
-            pieces, census, _ = _pieces(work, gpu, reps, (first, end))
-            run_bytes = (run_traffic(work, gpu, (first, end), census=census)
+            pieces, _, every = _pieces(work, gpu, reps, (first, end))
+            run_bytes = (run_traffic(work, gpu, (first, end), pieces=every, census=pieces.census)
                          if reps.share < 1 and gpu.sample.run_traffic else None)
+            del every
             for i, (r, _) in enumerate(members):
                 machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
                                                              sms=fit[i], run_bytes=run_bytes)
