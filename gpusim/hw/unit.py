@@ -60,9 +60,15 @@ def cycles(fp: int) -> int:
     return -(-fp // FP)
 
 
+def _shift(d: int) -> int:
+    """log2 of ``d`` where it is a power of two, else -1."""
+    return d.bit_length() - 1 if d & (d - 1) == 0 else -1
+
+
 def div(a, d: int):
     """``a // d`` for non-negative integer arrays (a shift when ``d`` is a power of two)."""
-    return a >> (d.bit_length() - 1) if d & (d - 1) == 0 else a // d
+    shift = _shift(d)
+    return a >> shift if shift >= 0 else a // d
 
 
 def mod(a, d: int):
@@ -98,11 +104,6 @@ def interleave(address, granularity: int, instances: int):
 
 _CHUNK = 1 << 18
 _KERNEL: list = []     # [the compiled _interleave_into, or None], made on first use
-
-
-def _shift(d: int) -> int:
-    """log2 of ``d`` where it is a power of two, else -1."""
-    return d.bit_length() - 1 if d & (d - 1) == 0 else -1
 
 
 def _interleave_into(address, granularity, instances, g_shift, n_shift, out):
