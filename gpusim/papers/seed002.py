@@ -30,15 +30,17 @@ from gpusim.papers.base import (WITHIN_1_5X, Comparison, Missing, PaperRow, Sect
 RELATIVE_TIME = (("Weighted-blended OIT", 1.17, "wboit"), ("MLAB, 2 layers", 2.78, "mlab-2"),
                  ("MLAB, 4 layers", 4.75, "mlab-4"), ("MLAB, 2 layers, rasterizer-ordered view", 2.78, "mlab-2-rov"),
                  ("MLAB, 4 layers, rasterizer-ordered view", 4.75, "mlab-4-rov"),
-                 ("Moment-based OIT, 4 power moments", 2.64, "mboit-power4"),
-                 ("Moment-based OIT, 6 power moments", 3.13, "mboit-power6"),
-                 ("Moment-based OIT, 4 trigonometric", 5.00, "mboit-trig4"), ("LucidRaster", 3.30, "lucidraster"))
+                 ("Moment-based OIT, 4 power moments, 80 bits", 2.64, "mboit-power4"),
+                 ("Moment-based OIT, 6 power moments, 112 bits", 3.13, "mboit-power6"),
+                 ("Moment-based OIT, 4 trigonometric, 144 bits", 5.00, "mboit-trig4"),
+                 ("LucidRaster", 3.30, "lucidraster"))
 _BLENDER = ("MLAB's ordered read-modify-write of its layers (8 bytes each) runs in the ROP's programmable blender, "
             "one invocation per fragment")
 _ROV = ("MLAB's layers read and written by the shader behind the pixel's interlock (the scoreboard), its insertion "
         "and merge on the SM")
-_MBOIT = ("MBOIT renders the scene twice: moments by additive blending, then each fragment's transmittance "
-          "reconstructed (ALU work) and its colour blended; a full-screen resolve")
+_MBOIT = ("MBOIT renders the scene twice: moments by additive blending (b_0 and each moment a 16-bit float, the "
+          "table's bits), then each fragment's transmittance reconstructed (ALU work) and its colour blended into "
+          "RGBA16F; a full-screen resolve")
 _WBOIT = ("WBOIT blends each fragment into an RGBA16F accumulation and an R16F revealage target in one pass; a "
           "full-screen composite")
 #: what each approximate baseline's time rests on in our model (the 1.5x mark applies to these rows)
