@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from gpusim.report.tables import (busy_errors, decided_by, error_percentiles, fidelity_errors, fidelity_misses,
-                                  fidelity_targets, with_labels)
+                                  fidelity_targets, sampled_wall_parts, with_labels)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -227,3 +227,21 @@ def test_committed_speed_report_measures_the_speed_targets():
     targets = fidelity_targets(errors).set_index(["level", "target"])
     speed = targets[targets.index.get_level_values("target").str.contains("speed-up")]
     assert (speed["cases"] > 0).all()
+
+
+def test_the_sampled_levels_wall_time_is_split_on_the_speed_cases():
+    """The speed cases' sampled runs: each part's share of the level's wall time, and the speed-up it would have
+    with its samples free (the full level's wall time over the whole run's part and the rest)."""
+    errors = fidelity_errors(with_labels(_results()))
+    stats = pd.DataFrame([{"run": run, "unit": "sample", "stat": "wall_seconds", "labels": f"part={part}",
+                           "value": value}
+                          for run in ("big-kbuffer-sampled", "small-kbuffer-sampled")
+                          for part, value in (("run", 0.2), ("programs", 0.1), ("events", 0.15), ("other", 0.0))])
+    parts = sampled_wall_parts(errors, stats).set_index("config")
+    assert len(parts) == 1                                   # the big kbuffer case alone: the others lack the split
+    row, big = parts.iloc[0], errors.set_index("run").loc["big-kbuffer-sampled"]
+    wall = big["wall_seconds"]
+    assert row["run_share"] == pytest.approx(0.2 / wall) and row["events_share"] == pytest.approx(0.15 / wall)
+    assert row["other_share"] == pytest.approx((wall - 0.45) / wall)     # the wall time in none of the parts
+    assert row["speedup_samples_free"] == pytest.approx(big["full_wall_seconds"] / (wall - 0.25))
+    assert sampled_wall_parts(errors, stats.iloc[:0]).empty

@@ -239,6 +239,13 @@ def test_a_thinned_sampled_run_extrapolates_to_the_whole_work(spheres, scheme):
     assert rows["thin"] == s["thin"] and rows["work_checks"] == 2
     assert rows["slope_std_error"] == pytest.approx(s["work_check"]["slope_std_error"])
     assert not {"thin", "work_checks"} & {r["stat"] for r in timing_stat_rows(off)}
+    # where the level's wall time went: the whole run's part, the samples' lowering and events, the rest
+    for timing in (off, on):
+        parts = timing["sample"]["wall_seconds"]
+        assert set(parts) == {"run", "programs", "events", "other"} and min(parts.values()) >= 0
+        assert parts["events"] > 0 and sum(parts.values()) <= timing["event_seconds"] + 1e-3
+    walls = {r["labels"]: r["value"] for r in timing_stat_rows(on) if r["stat"] == "wall_seconds"}
+    assert walls == {f"part={k}": v for k, v in on["sample"]["wall_seconds"].items()}
 
 
 @pytest.mark.parametrize("scheme", ["zbuffer", "freepipe-abuffer"])

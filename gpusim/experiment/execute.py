@@ -171,6 +171,14 @@ def trace_stat_rows(trace) -> list[dict]:
                   "triangles the scene sent to the rasterizer (after any subdivision)")]
 
 
+#: the sampled level's wall-time parts (``sample.wall_seconds`` in its record)
+WALL_PARTS = {"run": "the whole run: its operations counted, its traffic sampled, its L2 warmed (a smaller sample "
+                     "does not shorten it)",
+              "programs": "lowering the samples (the replicates and checks; summed over their processes)",
+              "events": "replaying the samples in the event model (summed over their processes)",
+              "other": "the rest: the estimate, its interval and the record"}
+
+
 def timing_stat_rows(timing: dict) -> list[dict]:
     """A timing level's stats in long form (see :func:`functional_stat_rows`)."""
     rows = [_stat("machine", "cycles", timing["cycles"], "cycles", f"run time ({timing['fidelity']})")]
@@ -195,6 +203,9 @@ def timing_stat_rows(timing: dict) -> list[dict]:
                                  ("tiles_per_replicate", "tiles", "screen tiles each replicate samples")):
         if key in sample:                       # the sampled level's sample
             rows.append(_stat("sample", key, sample[key], value_unit, doc))
+    for part, seconds in sample.get("wall_seconds", {}).items():       # where its wall time went
+        rows.append(_stat("sample", "wall_seconds", seconds, "s", f"the level's wall time spent on {WALL_PARTS[part]}",
+                          f"part={part}"))
     check = sample.get("scale_check")
     if check:                                   # and its scale check
         rows.append(_stat("sample", "scale_check_sms", check["sms"], "SMs",

@@ -831,6 +831,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     rmw_all = rmw_threads(work.plan, work)
     pieces = outcomes = run_bytes = None
     members, count, work_checks = _members_of(reps, gpu)
+    spent = {"run": 0.0, "programs": 0.0, "events": 0.0}     # the level's wall time, by what it went to
     if chunks is None:
         pieces, _, every = _pieces(work, gpu, reps, None)
         warm = share < 1 and gpu.l2.size_bytes and "l2" in gpu.memory.levels
@@ -839,15 +840,18 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         run_bytes = (run_traffic(work, gpu, None, run, every, pieces.census)
                      if share < 1 and gpu.sample.run_traffic else None)
         del run, every
-    if chunks is None:
+        spent["run"] = time.perf_counter() - start
 
-        def replicate(member, gpu=gpu) -> tuple[dict, int]:
+        def replicate(member, gpu=gpu) -> tuple[dict, int, float, float]:
             r, floor = member
+            t0 = time.perf_counter()
             machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, outcomes=outcomes,
                                                          front=front, floor=floor, run_bytes=run_bytes)
+            t1 = time.perf_counter()
             rec, _ = run_full(work, machine, program=program)
-            return _replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
-                              rmw_threads(program, work), rmw_all, theta), machine.core.sms
+            return (_replicate(work, rec, [(p.operations, p.operations_total) for p in program.passes],
+                               rmw_threads(program, work), rmw_all, theta), machine.core.sms,
+                    t1 - t0, time.perf_counter() - t1)
 
         # the replicates are independent: one per process where the CPUs and their size allow (each then
         # replays its passes serially); the figures are the same
@@ -855,28 +859,38 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
                                MIN_REPLICATE_OPERATIONS)
         done = None
         if workers > 1:                          # what the replicates share, counted once before the fork
+            t0 = time.perf_counter()
             share_pieces(pieces, work.plan, gpu, len(work.plan.passes))
             reps.prepare(pieces)
+            spent["run"] += time.perf_counter() - t0
             serial = gpu.replace(runner=dataclasses.replace(gpu.runner, workers=1))
             done = fork_map(lambda m: replicate(m, serial), members, workers)
         if done is None:
             done = [replicate(m) for m in members]
         runs, machines = [d[0] for d in done], [d[1] for d in done]
+        spent["programs"], spent["events"] = sum(d[2] for d in done), sum(d[3] for d in done)
     else:                                    # a chunk of passes at a time, each replicate's sample of each
         fit = _chunked_sms(work, gpu, reps, members, chunks)
+        spent["run"] = time.perf_counter() - start
         streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in members]
         ops: list[list] = [[] for _ in members]
         readers: list[list] = [[] for _ in members]
         thetas: list[list] = [[] for _ in members]
         for first, end in chunks:
+            t0 = time.perf_counter()
             pieces, _, every = _pieces(work, gpu, reps, (first, end))
             run_bytes = (run_traffic(work, gpu, (first, end), pieces=every, census=pieces.census)
                          if reps.share < 1 and gpu.sample.run_traffic else None)
             del every
+            spent["run"] += time.perf_counter() - t0
             for i, (r, _) in enumerate(members):
+                t0 = time.perf_counter()
                 machine, program, theta = _replicate_program(work, gpu, reps, r, pieces, (first, end), front=front,
                                                              sms=fit[i], run_bytes=run_bytes)
+                t1 = time.perf_counter()
                 streams[i].replay(machine, program, first)
+                spent["programs"] += t1 - t0
+                spent["events"] += time.perf_counter() - t1
                 ops[i] += [(p.operations, p.operations_total) for p in program.passes]
                 readers[i].append(_rmw_readers(program))
                 thetas[i].append(theta)
@@ -937,6 +951,10 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
                      "thin": reps.theta, "replicate_thinning": [run["thinning"] for run in runs],
                      "work_check": work_info}
     rec["event_seconds"] = time.perf_counter() - start
+    # where the wall time went: counting and lowering the whole run (which a smaller sample does not shorten),
+    # lowering the samples and replaying them (summed over the processes that ran them), and the rest
+    rec["sample"]["wall_seconds"] = {**{k: round(v, 4) for k, v in spent.items()},
+                                     "other": round(max(0.0, rec["event_seconds"] - sum(spent.values())), 4)}
     rec["cycles"] = int(cycles)
     rec["microseconds"] = cycles / gpu.core.clock_mhz
     return rec, None

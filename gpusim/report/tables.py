@@ -164,6 +164,33 @@ def fast_cases(errors: pd.DataFrame) -> pd.DataFrame:
     return errors[errors["fragments"] >= FAST_CASE_FRAGMENTS]
 
 
+def sampled_wall_parts(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFrame:
+    """Per sampled case of :func:`fast_cases` whose record splits its wall time (``sample.wall_seconds``): the
+    full and sampled wall times, each part's share of the sampled level's (the whole run, the samples' lowering,
+    their events, the rest), and the speed-up the level would have with its samples free (the full level's
+    wall time over the run's part and the rest): what a smaller or faster sample can still buy."""
+    runs = fast_cases(errors)
+    runs = runs[runs["fidelity"] == "sampled"]
+    sel = stats[(stats["unit"] == "sample") & (stats["stat"] == "wall_seconds")]
+    if runs.empty or sel.empty:
+        return pd.DataFrame()
+    parts = sel.assign(part=sel["labels"].str.extract(r"part=(\w+)")[0]).pivot_table(
+        index="run", columns="part", values="value", aggfunc="sum")
+    rows = []
+    for _, e in runs.iterrows():
+        if e["run"] not in parts.index:
+            continue
+        p = parts.loc[e["run"]].fillna(0.0)
+        wall = e["wall_seconds"]
+        fixed = p.get("run", 0.0) + p.get("other", 0.0) + max(0.0, wall - p.sum())
+        rows.append({"config": e["config"], "full_wall_seconds": e["full_wall_seconds"], "wall_seconds": wall,
+                     "speedup": e["speedup"], "run_share": p.get("run", 0.0) / wall,
+                     "programs_share": p.get("programs", 0.0) / wall, "events_share": p.get("events", 0.0) / wall,
+                     "other_share": fixed / wall - p.get("run", 0.0) / wall,
+                     "speedup_samples_free": e["full_wall_seconds"] / fixed if fixed > 0 else math.nan})
+    return pd.DataFrame(rows)
+
+
 def fidelity_targets(errors: pd.DataFrame) -> pd.DataFrame:
     """Each of :data:`FIDELITY_TARGETS` on ``errors``: the measured value (NaN where no run counts: no such
     level, or for a speed-up no case of :data:`FAST_CASE_FRAGMENTS` fragments), the cases that count, and
