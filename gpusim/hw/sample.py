@@ -766,21 +766,17 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
     return out
 
 
-def _chunked_sms(work: Workload, gpu, reps: Replicates, members: list, chunks: list[tuple[int, int]]) -> list[int]:
-    """The SMs of each (sample, fewest SMs) of ``members`` (a sample a tuple: the union of those replicates)
-    of a run sampled a chunk of passes at a time: as :func:`replicate_sms` gives for its sample of the whole
-    run (one machine size for every chunk, as when the run is lowered at once), from the operations its
-    sample keeps of each chunk's."""
-    kept, total = [0] * len(members), 0
-    for first, end in chunks:
-        pieces = (_candidate_pieces(work, reps, (first, end)) if reps.share < 1    # counted only
-                  else plan_pieces(work, (first, end), addresses=False))
-        total += int(pieces.totals.sum()) if pieces.totals is not None else sum(pc.operations for pc in pieces)
-        for i, (r, _) in enumerate(members):
-            masks = sample_masks(pieces, Keep(reps, r), first)
-            kept[i] += sum(int(np.count_nonzero(m)) for pc, m in zip(pieces, masks) if pc.instructions is None)
-        del pieces
-    return [fitted_sms(gpu, k, total, floor) for k, (_, floor) in zip(kept, members)]
+def _chunk_samples(work: Workload, gpu, reps: Replicates, members: list, first: int, end: int):
+    """The pieces of a chunk of passes (``first`` to ``end - 1``) that its samples are lowered from (:func:`_pieces`:
+    the rows some replicate may keep, with the census of every operation) and the run's coalesced traffic in
+    them (:func:`run_traffic`), with the operations each of ``members`` keeps of the chunk."""
+    pieces, _, every = _pieces(work, gpu, reps, (first, end))
+    run_bytes = (run_traffic(work, gpu, (first, end), pieces=every, census=pieces.census)
+                 if reps.share < 1 and gpu.sample.run_traffic else None)
+    del every
+    kept = [sum(int(np.count_nonzero(m)) for pc, m in zip(pieces, sample_masks(pieces, Keep(reps, r), first))
+                if pc.instructions is None) for r, _ in members]
+    return pieces, run_bytes, kept
 
 
 def _members_of(reps: Replicates, gpu) -> tuple[list, int, list]:
@@ -870,18 +866,30 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         runs, machines = [d[0] for d in done], [d[1] for d in done]
         spent["programs"], spent["events"] = sum(d[2] for d in done), sum(d[3] for d in done)
     else:                                    # a chunk of passes at a time, each replicate's sample of each
-        fit = _chunked_sms(work, gpu, reps, members, chunks)
+        # every member runs on one machine size for all the chunks (as when the run is lowered at once), the one
+        # its sample of the whole run takes: counted from each chunk's pieces, which are kept for its replay (the
+        # rows some replicate may keep: a small share of the run's), so each chunk is expanded once; where a
+        # replicate is the whole run, on every SM, and the chunk's pieces are made when it is replayed
+        prepared = ([_chunk_samples(work, gpu, reps, members, first, end) for first, end in chunks]
+                    if reps.share < 1 else None)
+        if prepared is not None:
+            total = int(pass_operations(work.plan)[chunks[0][0]:chunks[-1][1]].sum())
+            fit = [fitted_sms(gpu, sum(p[2][i] for p in prepared), total, floor)
+                   for i, (_, floor) in enumerate(members)]
+        else:
+            fit = [fitted_sms(gpu, 1, 1, floor) for _, floor in members]
         spent["run"] = time.perf_counter() - start
         streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in members]
         ops: list[list] = [[] for _ in members]
         readers: list[list] = [[] for _ in members]
         thetas: list[list] = [[] for _ in members]
-        for first, end in chunks:
+        for c, (first, end) in enumerate(chunks):
             t0 = time.perf_counter()
-            pieces, _, every = _pieces(work, gpu, reps, (first, end))
-            run_bytes = (run_traffic(work, gpu, (first, end), pieces=every, census=pieces.census)
-                         if reps.share < 1 and gpu.sample.run_traffic else None)
-            del every
+            if prepared is not None:
+                pieces, run_bytes, _ = prepared[c]
+                prepared[c] = None
+            else:
+                pieces, run_bytes, _ = _chunk_samples(work, gpu, reps, [], first, end)
             spent["run"] += time.perf_counter() - t0
             for i, (r, _) in enumerate(members):
                 t0 = time.perf_counter()
