@@ -197,6 +197,24 @@ def ops_in_passes(g, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
     return expand_counts(who, m, s0)
 
 
+def _pass_major_ops(g, passes: tuple[int, int] | None) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int, int]]]:
+    """``(i, seq, runs)`` of a group with a ``seq_pass`` (op ``s`` of every thread in pass ``seq_pass[s]``,
+    strictly ascending) in passes ``passes[0]`` to ``passes[1] - 1`` (all by default): its operations a pass at
+    a time, each pass's threads in order, and each pass's (pass, first row, end row). The rows
+    :func:`ops_in_passes` gives, in the order :func:`split_by` of their passes puts them, without the sort."""
+    count = g.count
+    top = int(count.max()) if len(count) else 0
+    s0, s1 = (0, top) if passes is None else (int(x) for x in np.searchsorted(g.seq_pass, passes))
+    steps = range(s0, min(s1, top))
+    who = [np.flatnonzero(count > s) for s in steps]
+    sizes = np.array([len(w) for w in who], np.int64)
+    i = np.concatenate(who) if who else np.zeros(0, np.int64)
+    seq = np.repeat(np.arange(s0, s0 + len(sizes), dtype=np.int64), sizes)
+    ends = np.cumsum(sizes)
+    runs = [(int(g.seq_pass[s]), int(e - m), int(e)) for s, m, e in zip(steps, sizes, ends) if m]
+    return i, seq, runs
+
+
 def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None, keep_rows=None,
                   addresses: bool = True) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes; only those of passes
@@ -205,7 +223,11 @@ def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | N
     their addresses (zeros) and bytes (0), to be counted only."""
     n = len(g.thread)
     threads = g.thread_ids()
-    i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
+    runs = None
+    if g.seq_pass is not None:                     # a pass per operation of a thread: made a pass at a time
+        i, seq, runs = _pass_major_ops(g, passes)
+    else:
+        i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
     if not len(i):
         return []
     single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
@@ -213,12 +235,25 @@ def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | N
     # addresses of every row of the passes, then the kept ones: a group's offsets may rank its rows among all
     # of a pass's (the R-buffer's FIFO sequence), so they are not made for a subset
     if addresses:
-        addr = np.asarray(g.offset(i, seq), np.int64) + (0 if g.is_compute else bases[g.structure])
+        addr = np.asarray(g.offset(i, seq), np.int64)
+        if not g.is_compute:                       # (a compute group's offsets are zeros: not copied again)
+            addr = addr + bases[g.structure]
         nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
     else:
         addr, nbytes = np.broadcast_to(np.int64(0), (len(i),)), 0
     pass_of = g.pass_of(i, seq)
     rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
+    if runs is not None:                           # each pass's rows lie together, its threads in order
+        pieces = []
+        for p, a, b in runs:
+            idx = slice(a, b) if rows is None or rows[a:b].all() else np.flatnonzero(rows[a:b]) + a
+            if isinstance(idx, np.ndarray) and not len(idx):
+                continue
+            # copies, not views: a piece kept holds its own rows, not the whole group's
+            pieces.append(_Piece(gi, p, threads[i[idx]], None, np.array(addr[idx]),
+                                 nbytes if np.isscalar(nbytes) else np.array(nbytes[idx]),
+                                 None if instr is None else np.array(instr[idx])))
+        return pieces
     if rows is not None and not rows.all():
         sel = np.flatnonzero(rows)
         if not len(sel):
