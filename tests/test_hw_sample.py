@@ -134,7 +134,9 @@ def test_the_sampled_record_and_text_give_the_interval(tmp_path, spheres, capsys
     assert main(["replay", str(path), "--scheme", "zbuffer", "--fidelity", "sampled", "--gpu-set", "sample.tile=4",
                  "--gpu-set", "sample.min_tiles=1", "--gpu-set", "sample.thin=0.25",
                  "--gpu-set", "sample.thin_min_tiles=1"]) == 0
-    assert "of their SMs' work and extrapolated to the whole by the work checks" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "of their SMs' work and extrapolated to the whole by the work checks" in text
+    assert "s on the whole run (its operations counted, its traffic sampled)" in text and "s replaying them" in text
 
 
 def test_the_scale_check_takes_a_pass_end_to_grow_as_the_log_of_the_sms():

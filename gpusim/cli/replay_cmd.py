@@ -160,6 +160,12 @@ def _timing_text(t: dict, add) -> None:
             f"{t['cycle_error_estimate']:.1%}: {what} over "
             f"the cycles, from {counted(s['replicates'], 'replicate')} of {counted(s['sms'], 'SM')} each, "
             f"{s['tiles_per_replicate']:,} of {counted(s['tiles'], 'tile')}{thin}{scale})")
+    if "cycles_ci95_low" in t and t["sample"].get("wall_seconds"):
+        w = t["sample"]["wall_seconds"]
+        total = sum(w.values()) or 1.0
+        add(f"  wall       {w['run']:.2f} s on the whole run (its operations counted, its traffic sampled), "
+            f"{w['programs']:.2f} s lowering the samples, {w['events']:.2f} s replaying them "
+            f"({w['events'] / total:.0%} of the level's time)")
     for p in t["passes"][:12]:
         extra = f"  bound: {p['bound']}" if "bound" in p else ""
         add(f"  pass       {p['name']:<20} {p['cycles']:>14,} cycles  {p['warps']:>8,} warps{extra}")
