@@ -461,13 +461,13 @@ def test_a_small_run_samples_at_least_min_tiles_and_the_smallest_is_the_run(sphe
     assert part["sample"]["sms"] == 5 and part["sample"]["tiles_per_replicate"] == 10
 
 
-def _same_piece(a, b, addresses: bool = True) -> bool:
-    """Two pieces with the same rows (``addresses`` false: whatever their addresses and bytes)."""
+def _same_piece(a, b) -> bool:
+    """Two pieces with the same rows, addresses and bytes."""
     def same(x, y):
         return (x is None) == (y is None) and (x is None or np.array_equal(x, y))
     return ((a.group, a.pass_index) == (b.group, b.pass_index) and np.array_equal(a.thread, b.thread)
             and same(a.k, b.k) and same(a.instructions, b.instructions)
-            and (not addresses or np.array_equal(a.address, b.address) and np.array_equal(a.nbytes, b.nbytes)))
+            and np.array_equal(a.address, b.address) and np.array_equal(a.nbytes, b.nbytes))
 
 
 @pytest.mark.parametrize("scheme, params", [
@@ -491,11 +491,8 @@ def test_pieces_of_the_candidate_rows_lower_the_same_samples(scheme, params):
     every = plan_pieces(work)
     some, census, whole = sample._pieces(work, gpu, again, None)
     assert sum(len(pc.thread) for pc in some) < sum(len(pc.thread) for pc in every)
-    # taken from the run's pieces (made once), the candidates are the rows made alone (for counting, without
-    # addresses) and the census counts what the pieces of every row load and their atomic words
+    # the run's pieces are made once; the census counts what the pieces of every row load and their atomic words
     assert len(whole) == len(every) and all(_same_piece(a, b) for a, b in zip(whole, every))
-    made = sample._candidate_pieces(work, Replicates(work, gpu), None)
-    assert len(made) == len(some) and all(_same_piece(a, b, addresses=False) for a, b in zip(made, some))
     loads = _run_loads(plan_pieces(work), work.plan, gpu, len(work.plan.passes))["every"]
     assert census.every.keys() == loads.keys()
     assert all(np.array_equal(census.every[k], loads[k]) for k in loads)
@@ -574,18 +571,3 @@ def test_the_runs_traffic_is_estimated_from_a_sample_of_its_own_warps(spheres, m
     assert np.isin(lanes[np.isin(run_warp, chosen)], mine).all()        # whole warps
     assert np.array_equal(warps(0, mine), run_warp[np.isin(lanes, mine)] // 4)
     assert (3 < scale).all() and (scale < 5).all()       # the run's load on each partition over the quarter's
-
-
-def test_kept_rows_keep_the_addresses_every_row_gives():
-    """A group's offsets may rank a row among all of a pass's (the R-buffer's reads: their FIFO sequence), so
-    plan_pieces makes every row's address before it keeps some: the kept rows' addresses are those of the
-    pieces of every row."""
-    from gpusim.schemes import make_scheme
-    trace = trace_scene(*load_scene("nested-spheres", ["screen.width=48", "screen.height=48"]), progress=False)
-    work = Workload.of(make_scheme("r-buffer", {}).run(trace), trace)
-    every = plan_pieces(work)
-    odd = plan_pieces(work, keep_rows=lambda pass_of, threads, lane: threads[lane] % 2 == 1)
-    for pc in every:
-        got = [q for q in odd if (q.group, q.pass_index) == (pc.group, pc.pass_index)]
-        mine = pc.thread % 2 == 1
-        assert (len(got) == 1 and np.array_equal(got[0].address, pc.address[mine])) or (not got and not mine.any())

@@ -215,12 +215,9 @@ def _pass_major_ops(g, passes: tuple[int, int] | None) -> tuple[np.ndarray, np.n
     return i, seq, runs
 
 
-def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None, keep_rows=None,
-                  addresses: bool = True) -> list[_Piece]:
+def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | None = None) -> list[_Piece]:
     """Rows of group ``g``, split by pass: thread, loop iteration, address, bytes; only those of passes
-    ``passes[0]`` to ``passes[1] - 1`` when given, and of those only the rows ``keep_rows(pass, threads,
-    lane)`` keeps (a mask, or None for all) (see :func:`plan_pieces`). ``addresses`` false: rows without
-    their addresses (zeros) and bytes (0), to be counted only."""
+    ``passes[0]`` to ``passes[1] - 1`` when given."""
     n = len(g.thread)
     threads = g.thread_ids()
     runs = None
@@ -230,40 +227,20 @@ def _group_pieces(gi: int, g, bases: dict[str, int], passes: tuple[int, int] | N
         i, seq = g.expand_ops() if passes is None else ops_in_passes(g, *passes)
     if not len(i):
         return []
-    single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
     instr = np.asarray(g.instructions)[i] if g.is_compute else None
-    # addresses of every row of the passes, then the kept ones: a group's offsets may rank its rows among all
-    # of a pass's (the R-buffer's FIFO sequence), so they are not made for a subset
-    if addresses:
-        addr = np.asarray(g.offset(i, seq), np.int64)
-        if not g.is_compute:                       # (a compute group's offsets are zeros: not copied again)
-            addr = addr + bases[g.structure]
-        nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
-    else:
-        addr, nbytes = np.broadcast_to(np.int64(0), (len(i),)), 0
-    pass_of = g.pass_of(i, seq)
-    rows = keep_rows(pass_of, threads, i) if keep_rows is not None else None
+    addr = np.asarray(g.offset(i, seq), np.int64)
+    if not g.is_compute:                           # (a compute group's offsets are zeros: not copied again)
+        addr = addr + bases[g.structure]
+    nbytes = np.asarray(g.bytes(i, seq), np.int32) if callable(g.bytes) else int(g.bytes)
     if runs is not None:                           # each pass's rows lie together, its threads in order
-        pieces = []
-        for p, a, b in runs:
-            idx = slice(a, b) if rows is None or rows[a:b].all() else np.flatnonzero(rows[a:b]) + a
-            if isinstance(idx, np.ndarray) and not len(idx):
-                continue
-            # copies, not views: a piece kept holds its own rows, not the whole group's
-            pieces.append(_Piece(gi, p, threads[i[idx]], None, np.array(addr[idx]),
-                                 nbytes if np.isscalar(nbytes) else np.array(nbytes[idx]),
-                                 None if instr is None else np.array(instr[idx])))
-        return pieces
-    if rows is not None and not rows.all():
-        sel = np.flatnonzero(rows)
-        if not len(sel):
-            return []
-        i, seq, addr = i[sel], seq[sel], addr[sel]
-        nbytes = nbytes if np.isscalar(nbytes) else nbytes[sel]
-        instr = None if instr is None else instr[sel]
-        pass_of = pass_of if np.isscalar(pass_of) else pass_of[sel]
-    whole = single and len(i) == n                 # every thread's one operation, in thread order
+        # copies, not views: a piece kept holds its own rows, not the whole group's
+        return [_Piece(gi, p, threads[i[a:b]], None, addr[a:b].copy(),
+                       nbytes if np.isscalar(nbytes) else nbytes[a:b].copy(),
+                       None if instr is None else instr[a:b].copy()) for p, a, b in runs]
+    pass_of = g.pass_of(i, seq)
     if np.isscalar(pass_of):
+        single = n > 0 and int(g.count.min()) == 1 and int(g.count.max()) == 1   # every op is its thread's first
+        whole = single and len(i) == n             # every thread's one operation, in thread order
         return [_Piece(gi, int(pass_of), threads if whole else threads[i], None if single else seq, addr, nbytes,
                        instr)]
     pieces = []
@@ -340,21 +317,13 @@ def _run_words(pieces: list[_Piece], plan: OpPlan) -> tuple[np.ndarray, np.ndarr
     return words
 
 
-def plan_pieces(work: Workload, passes: tuple[int, int] | None = None, keep_rows=None,
-                addresses: bool = True) -> Pieces:
+def plan_pieces(work: Workload, passes: tuple[int, int] | None = None) -> Pieces:
     """The rows of each group in each pass (of ``passes``, numbered from its first), before lanes are known;
-    :func:`lower` takes them (``pieces``) when it lowers several samples of one run. ``keep_rows(pass,
-    threads, lane)`` (each row's pass, or one for all; a group's threads; each row's index into them): the
-    rows to keep (the sampled level's: those some sample may keep), a mask or None for all; the pieces
-    then hold ``totals``, the run's memory operations in each pass. ``addresses`` false: rows whose
-    addresses and bytes are left out, for counting what a sample keeps (they cannot be lowered)."""
+    :func:`lower` takes them (``pieces``) when it lowers several samples of one run."""
     p_first = passes[0] if passes is not None else 0
-    pieces = Pieces(pc for gi, g in enumerate(work.plan.groups)
-                    for pc in _group_pieces(gi, g, work.bases, passes, keep_rows, addresses))
+    pieces = Pieces(pc for gi, g in enumerate(work.plan.groups) for pc in _group_pieces(gi, g, work.bases, passes))
     for pc in pieces:                  # pass numbers of this program
         pc.pass_index -= p_first
-    if keep_rows is not None:
-        pieces.totals = pass_operations(work.plan)[p_first:(passes[1] if passes is not None else None)]
     return pieces
 
 

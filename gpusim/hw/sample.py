@@ -274,13 +274,11 @@ class Replicates:
         self.info = {"tiles": occupied, "tiles_per_replicate": int(self.tiles[0].sum()),
                      "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
 
-    def candidate_rows(self, pass_of, threads: np.ndarray, lane: np.ndarray | None = None) -> np.ndarray | None:
-        """Of operations in passes ``pass_of`` (one for all, or one per operation) of ``threads[lane]`` (of
-        ``threads`` where ``lane`` is None), those
-        some replicate may keep (:func:`gpusim.hw.lower.plan_pieces`' ``keep_rows``): a fragment thread's in a
-        tile, a triangle thread's in a triangle block, that a replicate holds; every one of a pass whose
-        threads fill warps in order (its warps are chosen from all of them). None: all of them. Each pass's
-        replicates that hold one of its operations are noted in :attr:`seen` (:func:`_pieces`)."""
+    def candidate_rows(self, pass_index: int, threads: np.ndarray) -> np.ndarray | None:
+        """Of operations of ``threads`` in pass ``pass_index``, those some replicate may keep: a fragment
+        thread's in a tile, a triangle thread's in a triangle block, that a replicate holds; every one of a pass
+        whose threads fill warps in order (its warps are chosen from all of them). None: all of them. The pass's
+        replicates that hold one of its operations are noted in :attr:`seen` (:func:`_candidate_pieces`)."""
         if self.codes is None:
             modes = [thread_mapping(self.gpu, pk) for pk in self.work.plan.passes]
             self.codes = np.array([_MODES.index(m) for m in modes], np.int8)
@@ -288,31 +286,11 @@ class Replicates:
             bits = (1 << np.arange(self.count, dtype=np.int64))[:, None]
             self.held = (None, (self.tiles * bits).sum(axis=0)[self.frag_tile],
                          (self.triangles * bits).sum(axis=0)[self.work.frag_prim // self.gpu.core.warp_size])
-        if np.isscalar(pass_of):
-            lo, hi = int(pass_of), int(pass_of) + 1
-        else:
-            lo, hi = int(pass_of.min()), int(pass_of.max()) + 1
-        codes = self.codes[lo:hi]
-        if (codes == 0).all():                     # warps of the pass's threads: all of them
+        code = int(self.codes[pass_index])
+        if code == 0:                              # warps of the pass's threads: all of them
             return None
-        rows_threads = threads if lane is None else threads[lane]
-        if (codes == codes[0]).all():              # one mapping for every row: decided per thread
-            held = self.held[int(codes[0])][rows_threads]
-        else:
-            code = self.codes[pass_of]
-            held = np.full(len(rows_threads), -1, np.int64)
-            for c in (1, 2):
-                rows = np.flatnonzero(code == c)
-                if len(rows):
-                    held[rows] = self.held[c][rows_threads[rows]]
-        if np.isscalar(pass_of):
-            self.seen[lo] |= int(np.bitwise_or.reduce(held[held > 0])) if len(held) else 0
-        else:                                     # each pass's combinations of holders, then their union
-            R = self.count
-            mine = held > 0
-            combos = np.bincount(((pass_of[mine] - lo) << R) | held[mine], minlength=(hi - lo) << R)
-            for c in np.flatnonzero(combos):
-                self.seen[lo + (c >> R)] |= c & ((1 << R) - 1)
+        held = self.held[code][threads]
+        self.seen[pass_index] |= int(np.bitwise_or.reduce(held[held > 0])) if len(held) else 0
         return held != 0
 
     def prepare(self, pieces) -> None:
@@ -722,28 +700,23 @@ def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | Non
     return _candidate_pieces(work, reps, passes, every, census), census, every
 
 
-def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, every: list | None = None,
-                      census: Census | None = None):
+def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] | None, every: list, census: Census):
     """The pieces of the rows some replicate may keep (:meth:`Replicates.candidate_rows`), and every row of a
     graphics or software-rasterizer pass in which a replicate holds none: :class:`Keep` gives that replicate
     one unit of the pass's, drawn from all of its rows (as from the pieces of every row). Taken from ``every``,
     the pieces of every row (a replicate keeps or leaves a thread whole, so a kept row's iteration is the one it
-    has there), with ``census``, the census of every operation, for the samples' lowering; without ``every``,
-    made for those rows alone without their addresses, to count what each sample keeps."""
+    has there), with ``census``, the census of every operation, for the samples' lowering."""
     first, end = passes if passes is not None else (0, len(work.plan.passes))
     reps.seen[first:end] = 0
     totals = pass_operations(work.plan)[first:end]
-    if every is None:
-        pieces = plan_pieces(work, passes, reps.candidate_rows, addresses=False)
-    else:
-        pieces = Pieces()
-        for pc in every:
-            m = reps.candidate_rows(pc.pass_index + first, pc.thread)
-            if m is None or m.all():
-                pieces.append(pc)
-            elif m.any():
-                pieces.append(pc.take(np.flatnonzero(m)))
-        pieces.census, pieces.totals = census, totals
+    pieces = Pieces()
+    for pc in every:
+        m = reps.candidate_rows(pc.pass_index + first, pc.thread)
+        if m is None or m.all():
+            pieces.append(pc)
+        elif m.any():
+            pieces.append(pc.take(np.flatnonzero(m)))
+    pieces.census, pieces.totals = census, totals
     if reps.codes is None:                        # no operation asked about: nothing to keep
         return pieces
     held_by_all = (1 << reps.count) - 1
@@ -753,16 +726,10 @@ def _candidate_pieces(work: Workload, reps: Replicates, passes: tuple[int, int] 
         return pieces
     whole = np.zeros(len(work.plan.passes), bool)
     whole[short] = True
-    if every is None:
-        extra = plan_pieces(work, passes, lambda pass_of, threads, lane: (
-            None if np.isscalar(pass_of) and whole[int(pass_of)]
-            else np.broadcast_to(whole[pass_of], np.shape(lane))), addresses=False)
-    else:
-        extra = [pc for pc in every if whole[pc.pass_index + first]]
-    merged = sorted([pc for pc in pieces if not whole[pc.pass_index + first]] + list(extra),
-                    key=lambda pc: (pc.group, pc.pass_index))
-    out = type(pieces)(merged)
-    out.census, out.totals = pieces.census, pieces.totals
+    merged = sorted([pc for pc in pieces if not whole[pc.pass_index + first]]
+                    + [pc for pc in every if whole[pc.pass_index + first]], key=lambda pc: (pc.group, pc.pass_index))
+    out = Pieces(merged)
+    out.census, out.totals = census, totals
     return out
 
 
