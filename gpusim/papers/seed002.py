@@ -44,7 +44,7 @@ _MBOIT = ("MBOIT renders the scene twice: moments by additive blending (b_0 and 
 _WBOIT = ("WBOIT blends each fragment into an RGBA16F accumulation and an R16F revealage target in one pass; a "
           "full-screen composite")
 #: what each approximate baseline's time rests on in our model (the 1.5x mark applies to these rows)
-BASELINE_NOTES = {"mlab-2": _BLENDER, "mlab-4": _BLENDER, "mlab-2-rov": _ROV, "mlab-4-rov": _ROV,
+BASELINE_NOTES = {"wboit": _WBOIT, "mlab-2": _BLENDER, "mlab-4": _BLENDER, "mlab-2-rov": _ROV, "mlab-4-rov": _ROV,
                   "mboit-power4": _MBOIT, "mboit-power6": _MBOIT, "mboit-trig4": _MBOIT}
 #: the paper's scenes and their look-alikes (None: no look-alike bundled)
 SCENES = {"Boxes": "like-boxes-002", "Bunny": "like-bunny-002", "Conference": None, "Dragon": "like-dragon-002",
@@ -116,8 +116,8 @@ def _cycles(results, scene, variant, **params) -> float:
 
 
 def _scenes(results: pd.DataFrame, among=LOOK_ALIKES) -> list[str]:
-    """The scenes run, of ``among`` (seed 002's look-alikes by default; None: every scene)."""
-    return [s for s in dict.fromkeys(select(results)["scene"]) if among is None or s in among]
+    """The scenes run, of ``among`` (seed 002's look-alikes by default)."""
+    return [s for s in dict.fromkeys(select(results)["scene"]) if s in among]
 
 
 def _screen(results: pd.DataFrame, scene: str | None = None) -> str:
@@ -241,10 +241,10 @@ def _mboit_frame(results: pd.DataFrame) -> str:
     """Where the MBOIT paper's frame ran (its look-alike scaled by the experiment's rule, or another size)."""
     if not _own_frame(results, MBOIT_FRAME):
         return f"{MBOIT_FRAME} at {_screen(results, MBOIT_FRAME)}, not its frame: its samples are not the paper's"
-    k = MBOIT_SCALE
-    return (f"on {MBOIT_FRAME} at {_screen(results, MBOIT_FRAME)}: the MBOIT paper's frame (1024x1024, 49M "
-            f"transparent fragments, 47 a pixel) scaled {k}x each way; on laptop-ampere against that paper's "
-            "GTX 1080 Ti")
+    width, height = MBOIT_SCREEN
+    return (f"on {MBOIT_FRAME} at {_screen(results, MBOIT_FRAME)}: the MBOIT paper's frame ({width}x{height}, 49M "
+            f"transparent fragments, 47 a pixel) scaled {MBOIT_SCALE}x each way; on laptop-ampere against that "
+            "paper's GTX 1080 Ti")
 
 
 def _intro_rows(rows: list[PaperRow], results: pd.DataFrame) -> None:
@@ -259,7 +259,7 @@ def _intro_rows(rows: list[PaperRow], results: pd.DataFrame) -> None:
                                 "simulated cycles on seed 002's look-alikes; the paper's figure averages its scenes "
                                 "on two GPUs", "x"))
             continue
-        how = BASELINE_NOTES.get(variant, _WBOIT)
+        how = BASELINE_NOTES[variant]
         frame = _mboit_frame(results)
         rows.append(mark(guarded(lambda v=variant: mean(_relative(results, v, among=(MBOIT_FRAME,))), "§1 table",
                                  f"{name}: time / hardware alpha blending, on the MBOIT paper's frame", paper,

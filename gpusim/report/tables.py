@@ -182,11 +182,12 @@ def sampled_wall_parts(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFram
             continue
         p = parts.loc[e["run"]].fillna(0.0)
         wall = e["wall_seconds"]
-        fixed = p.get("run", 0.0) + p.get("other", 0.0) + max(0.0, wall - p.sum())
+        rest = p.get("other", 0.0) + max(0.0, wall - p.sum())     # the record's rest and what no part holds
+        fixed = p.get("run", 0.0) + rest
         rows.append({"config": e["config"], "full_wall_seconds": e["full_wall_seconds"], "wall_seconds": wall,
                      "speedup": e["speedup"], "run_share": p.get("run", 0.0) / wall,
                      "programs_share": p.get("programs", 0.0) / wall, "events_share": p.get("events", 0.0) / wall,
-                     "other_share": fixed / wall - p.get("run", 0.0) / wall,
+                     "other_share": rest / wall,
                      "speedup_samples_free": e["full_wall_seconds"] / fixed if fixed > 0 else math.nan})
     return pd.DataFrame(rows)
 
