@@ -250,6 +250,60 @@ def test_a_thinned_sampled_run_extrapolates_to_the_whole_work(spheres, scheme):
     assert walls == {f"part={k}": v for k, v in on["sample"]["wall_seconds"].items()}
 
 
+@pytest.mark.parametrize("scheme", ["zbuffer", "depth-peeling"])
+def test_a_thinned_samples_shared_units_and_front_end_are_as_busy_as_the_runs(spheres, scheme):
+    # a thinned replicate stands for the GPU on a frame thinned to theta of each pass: its front end's and
+    # shared units' busy cycles over theta are the run's (they were theta of them), and a sample of a few tiles,
+    # which reaches only some ROPs or partitions in a pass, stands for the run's load on the others too
+    base = ["runner.workers=1", "sample.min_tiles=1", "sample.tile=4"]
+    full = replay(spheres, scheme, {}, "full", load_gpu("gtx280", base))[1]["timing"]
+    on = replay(spheres, scheme, {}, "sampled", load_gpu("gtx280", base + ["sample.thin=0.25",
+                                                                          "sample.thin_min_tiles=1"]))[1]["timing"]
+    assert on["sample"]["thin"] < 1
+    for unit in ("raster", "rop", "dram"):
+        assert on["units"][unit]["busy_cycles"] == pytest.approx(full["units"][unit]["busy_cycles"], rel=0.03), unit
+
+
+@pytest.mark.parametrize("scheme, unit", [("linked-list", "atomic"), ("depth-peeling", "rop")])
+def test_a_sampled_runs_atomic_and_rop_requests_are_the_runs_operations(spheres, scheme, unit):
+    # the census counts every operation of the run on the atomic units and ROPs: their requests, exactly
+    base = ["runner.workers=1", "sample.min_tiles=1", "sample.tile=4"]
+    full = replay(spheres, scheme, {}, "full", load_gpu("gtx280", base))[1]["timing"]
+    sampled = replay(spheres, scheme, {}, "sampled", load_gpu("gtx280", base))[1]["timing"]
+    assert sampled["sample"]["share"] < 1
+    assert sampled["units"][unit]["requests"] == full["units"][unit]["requests"]
+
+
+@pytest.mark.parametrize("scheme", ["zbuffer", "freepipe-abuffer"])
+def test_with_an_l2_the_drams_figures_are_the_warmings_of_the_run(spheres, scheme):
+    # the L2's functional warming replays every request of the run: the DRAM's requests (the misses) and busy
+    # cycles are its, and the L2's misses; on this small case they are the full level's
+    base = ["runner.workers=1", "sample.min_tiles=1", "sample.tile=4"]
+    full = replay(spheres, scheme, {}, "full", load_gpu("laptop-ampere", base))[1]["timing"]["units"]
+    sampled = replay(spheres, scheme, {}, "sampled", load_gpu("laptop-ampere", base))[1]["timing"]
+    units = sampled["units"]
+    assert sampled["sample"]["share"] < 1
+    assert units["dram"]["requests"] == pytest.approx(full["dram"]["requests"], rel=0.02)
+    assert units["dram"]["busy_cycles"] == pytest.approx(full["dram"]["busy_cycles"], rel=0.02)
+    assert units["l2"]["misses"] == units["dram"]["requests"]
+    assert units["l2"]["hits"] + units["l2"]["misses"] == units["l2"]["requests"]
+    assert units["dram"]["utilisation_mean"] == pytest.approx(
+        units["dram"]["busy_cycles"] / (sampled["cycles"] * units["dram"]["instances"]))
+
+
+def test_the_runs_busy_cycles_count_the_load_on_instances_a_sample_does_not_reach():
+    from gpusim.hw.lower import reached_share
+    from gpusim.hw.unit import run_held
+    run = np.array([[4.0, 2.0, 2.0], [0.0, 0.0, 0.0], [1.0, 1.0, 2.0]])
+    mine = np.array([[1.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert reached_share(run, mine).tolist() == [0.75, 1.0, 0.5]
+    program = dataclasses.make_dataclass("P", ["passes", "thinning", "reached"])(
+        [0, 1, 2], np.array([0.5, 1.0, 0.25]), {"rop": reached_share(run, mine)})
+    held = np.array([30, 10, 10])
+    assert run_held(held, np.array([0, 1, 2]), program, "rop").tolist() == [80, 10, 80]
+    assert run_held(held, np.array([0, 1, 2]), program, "memory").tolist() == [60, 10, 40]
+
+
 @pytest.mark.parametrize("scheme", ["zbuffer", "freepipe-abuffer"])
 def test_the_interval_holds_the_replicates_spread_and_the_scale_checks_bias(spheres, scheme):
     # the check runs replicates 0 and 1's samples together on their SMs together (their figures are its own,

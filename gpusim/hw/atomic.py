@@ -32,7 +32,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.hw.memory.level import SECTOR
 from gpusim.hw.unit import (BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, address_ids, cycles, div, fp_costs,
-                            interleave, mod, occupancy, register_unit)
+                            interleave, mod, occupancy, register_unit, run_held)
 from gpusim.metrics.composite import run_starts
 
 
@@ -91,7 +91,8 @@ class AtomicUnit(Unit):
         self.busy_fp = np.bincount(cell_part, weights=cost, minlength=P).astype(np.int64).tolist()
         if prog.occupancy is not None:         # a sampled program: as long as the run's operations there
             cost = occupancy(cost, prog.wi_pass[cell_wi], cell_part, prog, "atomic")
-            self.run_busy_fp = np.bincount(cell_part, weights=cost, minlength=P).tolist()
+            self.run_busy_fp = np.bincount(cell_part, weights=run_held(cost, prog.wi_pass[cell_wi], prog, "atomic"),
+                                           minlength=P).tolist()
         self.requests = np.bincount(cell_part, weights=nops[hit], minlength=P).astype(np.int64).tolist()
         # the DRAM channel each cell's read-modify-writes hold (atomic.dram_rmw), or None
         self.dram = machine.units.get("dram") if config.dram_rmw else None

@@ -382,12 +382,12 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
     if keep is not None:
         masks = sample_masks(pieces, keep, p_first)
         words = _run_words(shared, plan)
-        occupancy, own_load = _occupancy(shared, masks, plan, gpu, n_pass)
+        occupancy, own_load, reached = _occupancy(shared, masks, plan, gpu, n_pass)
         for j, (pc, m) in enumerate(zip(pieces, masks)):
             if not m.all():
                 pieces[j] = pc.take(np.flatnonzero(m))
     else:
-        words = occupancy = own_load = None
+        words = occupancy = own_load = reached = None
     by_pass: list[list[_Piece]] = [[] for _ in range(n_pass)]
     for pc in pieces:
         if len(pc.thread):
@@ -567,18 +567,19 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
         pp.wi_start = warp_wi_start[pp.wi_start] if pp.lanes else np.zeros(1, np.int64)
     return Program(passes, units, lo, hi, wi_op, wi_unit, wi_cycles, wi_dep, (wi_op >= 0) & OP_PRODUCES[wi_op],
                    w, pa, g, k, row_sets, work.frag_pixel,
-                   occupancy=occupancy, own_load=own_load,
+                   occupancy=occupancy, own_load=own_load, reached=reached,
                    hold_scale=_hold_scale(words, rows.get("atomic", []), atomic_pass))
 
 
 def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu,
-               n_pass: int) -> tuple[dict | None, dict | None]:
+               n_pass: int) -> tuple[dict | None, dict | None, dict | None]:
     """A sample's ``Program.occupancy``: per shared unit, (passes, instances) factors, the whole run's load on
     each instance in each pass (bytes on the memory partitions, the ROPs' framebuffer reads and writes among
     them; operations on the atomic units and ROPs) over
     the kept threads' (1 where they put none); None when every factor is 1. And ``Program.own_load``, the kept
     threads' load there (for the same units). The run's loads are counted once per ``pieces``
-    (``Pieces.loads``)."""
+    (``Pieces.loads``). And ``Program.reached``: per such unit and pass, the share of the run's load there on
+    the instances the kept threads reach (:func:`reached_share`)."""
     cache = _run_loads(pieces, plan, gpu, n_pass)
     every, kept = cache["every"], {}
     for entries, m in zip(cache["keys"], masks):
@@ -587,7 +588,17 @@ def _occupancy(pieces: Pieces, masks: list[np.ndarray], plan: OpPlan, gpu,
     out = {name: np.where(k > 0, every[name] / np.maximum(k, 1e-9), 1.0).reshape(n_pass, -1)
            for name, k in kept.items()}
     out = {k: v for k, v in out.items() if not (v == 1).all()}
-    return out or None, {k: kept[k].reshape(n_pass, -1) for k in out} or None
+    reached = {k: reached_share(every[k].reshape(n_pass, -1), kept[k].reshape(n_pass, -1)) for k in out}
+    return out or None, {k: kept[k].reshape(n_pass, -1) for k in out} or None, reached or None
+
+
+def reached_share(run: np.ndarray, mine: np.ndarray) -> np.ndarray:
+    """Per pass, the share of the run's load ``run`` (passes, instances) on the instances a sample's own load
+    ``mine`` reaches (1 where the run has none): a sample of a few tiles reaches only some instances of a unit
+    in a pass, and the run's load on the others stands for nothing in it (``Program.reached``)."""
+    total = run.sum(axis=1)
+    there = np.where(mine > 0, run, 0.0).sum(axis=1)
+    return np.where(total > 0, there / np.where(total > 0, total, 1.0), 1.0)
 
 
 def _run_loads(pieces, plan: OpPlan, gpu, n_pass: int) -> dict:

@@ -159,13 +159,19 @@ class Program:
     # operations on its word in its pass over the sample's (a word's chain as long as in the run).
     # ``front_end_cycles``: cycles per triangle of the whole GPU's front end (a list: per pass, a thinned
     # sample's). ``l2_outcomes``: the run's L2
-    # outcome of each of its requests, which the sample's requests take (gpusim.hw.memory.warming). None: a
-    # whole run.
+    # outcome of each of its requests, which the sample's requests take (gpusim.hw.memory.warming).
+    # ``thinning``: per pass, the share of the work of the frame a thinned sample stands for (gpusim.hw.sample:
+    # its shared units' and front end's busy cycles over it are the run's). ``reached``: per shared unit (the
+    # keys of ``occupancy``) and pass, the share of the run's load on the instances the sample reaches
+    # (gpusim.hw.lower.reached_share: the run's busy cycles are the reached instances' over it). None: a whole
+    # run.
     occupancy: dict[str, np.ndarray] | None = field(repr=False, default=None)
     own_load: dict[str, np.ndarray] | None = field(repr=False, default=None)
     hold_scale: np.ndarray | None = field(repr=False, default=None)
     front_end_cycles: float | list[float] | None = None
     l2_outcomes: object | None = field(repr=False, default=None)
+    thinning: np.ndarray | None = field(repr=False, default=None)
+    reached: dict[str, np.ndarray] | None = field(repr=False, default=None)
 
     @property
     def instructions(self) -> int:

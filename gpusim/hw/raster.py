@@ -226,6 +226,8 @@ class Rasterizer(Unit):
         fe = [p for p in prog.passes if p.warp_triangles is not None]
         self.requests = [sum(p.triangles for p in fe)]
         self.busy_fp = [sum(math.ceil(self._span(p) * FP) for p in fe)]
+        if prog.thinning is not None:        # a thinned sample: the run's, each pass's over its share of the work
+            self.run_busy_fp = [sum(round(math.ceil(self._span(p) * FP) / prog.thinning[p.index]) for p in fe)]
 
     @classmethod
     def needed(cls, program, gpu) -> bool:

@@ -34,7 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gpusim.config import param
-from gpusim.hw.unit import BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, fp_cost, interleave, occupancy, register_unit
+from gpusim.hw.unit import (BUSY, FP, REQUESTS, UTILISATION, Stat, Unit, fp_cost, interleave, occupancy,
+                            register_unit, run_held)
 from gpusim.opplan import OPS
 
 PROGRAM_BLEND = OPS.index("program_blend")
@@ -118,7 +119,8 @@ class RopUnit(Unit):
         held = occupancy(service, self.row_pass, unit, prog, "rop")
         self.others = None if held is service else (held - service).tolist()
         if self.others is not None:
-            self.run_busy_fp = np.bincount(unit, weights=held, minlength=config.units).tolist()
+            self.run_busy_fp = np.bincount(unit, weights=run_held(held, self.row_pass, prog, "rop"),
+                                           minlength=config.units).tolist()
         self.row_wi = wi_row.tolist() if self.others is not None else None
         self.after, self.last = [0] * config.units, [-1] * config.units
         self.produces = prog.wi_produces.tolist()

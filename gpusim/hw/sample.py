@@ -98,7 +98,8 @@ import time
 import numpy as np
 
 from gpusim.hw.lower import (Census, Pieces, Workload, lower, memory_load, pass_operations, plan_pieces,
-                             sample_masks, share_pieces, split_by, submission_warps, thread_mapping, unit_load)
+                             reached_share, sample_masks, share_pieces, split_by, submission_warps, thread_mapping,
+                             unit_load)
 from gpusim.hw.memory.coalescer import memory_bytes
 from gpusim.hw.memory.warming import Outcomes
 from gpusim.hw.parallel import fork_map, fork_workers
@@ -449,8 +450,8 @@ def _replicate(work: Workload, rec: dict, passes: list[tuple[int, int]], rmw_kep
     for name, u in rec["units"].items():
         scale = 1.0 if name == "raster" else 1 / w    # the front end takes every triangle
         out["units"][name] = {k: v * scale if k in ADDITIVE else v for k, v in u.items()}
-        if "run_busy_cycles" in u:                    # a shared unit: the run's busy cycles, from its load
-            out["units"][name]["busy_cycles"] = out["units"][name].pop("run_busy_cycles") / thin
+        if "run_busy_cycles" in u:    # a shared unit (or a thinned sample's front end): the run's, from its load
+            out["units"][name]["busy_cycles"] = out["units"][name].pop("run_busy_cycles")
     for key, every, mine in zip(("rmw_hazards", "rmw_hazard_pixels"), rmw_all, rmw_kept):
         out[key] = min(every, rec.get(key, 0) * every / mine) if mine else 0
     return out
@@ -607,8 +608,12 @@ def coalesced_load(program: Program, gpu, run_bytes: np.ndarray) -> Program:
     ratio = np.where(mine > 0, np.maximum(np.nan_to_num(run_bytes) / np.maximum(mine, 1e-9), 1.0), 1.0)
     factor = np.where(known, ratio, program.occupancy["memory"])
     own = np.where(known, mine, program.own_load["memory"])
+    rows = known.all(axis=1)
+    reached = program.reached["memory"].copy()
+    reached[rows] = reached_share(np.nan_to_num(run_bytes[rows]), mine[rows])
     return dataclasses.replace(program, occupancy=program.occupancy | {"memory": factor},
-                               own_load=program.own_load | {"memory": own})
+                               own_load=program.own_load | {"memory": own},
+                               reached=program.reached | {"memory": reached})
 
 
 def thinned(program: Program, gpu, sms: int) -> tuple[Program, np.ndarray]:
@@ -627,7 +632,7 @@ def thinned(program: Program, gpu, sms: int) -> tuple[Program, np.ndarray]:
         hold = np.maximum(hold * theta[program.wi_pass[program.storage("atomic")[2]]], 1.0)
     front = program.front_end_cycles if program.front_end_cycles is not None else per_triangle_cycles(gpu)
     return dataclasses.replace(program, occupancy=occupancy, hold_scale=hold,
-                               front_end_cycles=(front * theta).tolist()), theta
+                               front_end_cycles=(front * theta).tolist(), thinning=theta), theta
 
 
 def work_check(per_pass: np.ndarray, theta: np.ndarray, checks: list[tuple[np.ndarray, np.ndarray]]
@@ -682,6 +687,38 @@ def _units(runs: list[dict], gpu, cycles: int) -> dict:
             u["utilisation_max"] = u["utilisation_mean"] * (sum(spread) / len(spread) if spread else 1.0)
         out[name] = u
     return out
+
+
+def _count(counted: dict, census: Census | None) -> None:
+    """Add the operations on the atomic units and ROPs the census of the run (or of a chunk of its passes)
+    counted to ``counted``: their requests are the run's operations there, not a sample's scaled up (a
+    replicate keeps the largest triangle's block, the heaviest warp, whole, so its share of those operations
+    can be far from its share of the run's: FreePipe's atomics were 1.5-2.5 times the run's, LucidRaster's
+    up to 9 times, on the fidelity corpus)."""
+    if census is None:
+        return
+    for name in ("atomic", "rop"):
+        if name in census.every:
+            counted[name] = counted.get(name, 0.0) + float(np.sum(census.every[name]))
+
+
+def _warmed_units(units: dict, dram: dict, cycles: int) -> None:
+    """With an L2, the DRAM's requests and busy cycles and the L2's misses in ``units`` are the run's, as the
+    functional warming of the L2 gives them (``dram``: :meth:`Outcomes.next_level`), in place of the samples'
+    scaled up: a sample's requests take the run's misses only as far as its lanes find the run's, and its
+    DRAM requests, scaled by its share of the run's bytes, were 50% over to 80% under the full level's on the
+    fidelity corpus (where its cycles were within 1%)."""
+    if "dram" in units:
+        busy = dram["busy_cycles"]
+        u = units["dram"]
+        u["requests"], u["busy_cycles"] = int(round(float(dram["requests"].sum()))), float(busy.sum())
+        u["utilisation_mean"] = float(busy.mean()) / cycles if cycles else 0.0
+        u["utilisation_max"] = float(busy.max()) / cycles if cycles else 0.0
+    if "l2" in units and "misses" in units["l2"]:
+        u = units["l2"]
+        u["misses"] = int(round(float(dram["requests"].sum())))
+        u["hits"] = max(0, int(u["requests"]) - u["misses"])
+        u["hit_rate"] = u["hits"] / u["requests"] if u["requests"] else 0.0
 
 
 def _pieces(work: Workload, gpu, reps: Replicates, passes: tuple[int, int] | None):
@@ -795,8 +832,10 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
     pieces = outcomes = run_bytes = None
     members, count, work_checks = _members_of(reps, gpu)
     spent = {"run": 0.0, "programs": 0.0, "events": 0.0}     # the level's wall time, by what it went to
+    counted: dict[str, float] = {}            # the run's operations on the atomic units and ROPs (the census's)
     if chunks is None:
         pieces, _, every = _pieces(work, gpu, reps, None)
+        _count(counted, pieces.census)
         warm = share < 1 and gpu.l2.size_bytes and "l2" in gpu.memory.levels
         run = lower(work, gpu, pieces=every) if warm else None    # the run's L2 outcomes (warming)
         outcomes = Outcomes(run, gpu) if warm else None
@@ -857,6 +896,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
                 prepared[c] = None
             else:
                 pieces, run_bytes, _ = _chunk_samples(work, gpu, reps, [], first, end)
+            _count(counted, pieces.census)
             spent["run"] += time.perf_counter() - t0
             for i, (r, _) in enumerate(members):
                 t0 = time.perf_counter()
@@ -907,6 +947,11 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
            "operations": int(runs[0]["operations"]), "passes": passes,
            "units_built": list(dict.fromkeys(u for run in runs for u in run["units_built"])),
            "units": _units(runs, gpu, cycles)}
+    for name, ops in counted.items():         # the run's operations on a unit, counted: its requests
+        if name in rec["units"]:
+            rec["units"][name]["requests"] = int(ops)
+    if outcomes is not None:
+        _warmed_units(rec["units"], outcomes.next_level(gpu), cycles)
     for key in ("rmw_hazards", "rmw_hazard_pixels"):
         rec[key] = int(round(np.mean([run[key] for run in runs])))
     check = scale_check(totals, machines, check_run, gpu.core.sms)

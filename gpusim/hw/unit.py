@@ -148,6 +148,26 @@ def occupancy(cost_fp: np.ndarray, pass_of: np.ndarray, instance: np.ndarray, pr
     return np.ceil(cost_fp * factor[pass_of, instance]).astype(np.int64)
 
 
+def run_held(held: np.ndarray, pass_of: np.ndarray, program, name: str) -> np.ndarray:
+    """The run's busy sub-cycles that requests holding shared unit ``name`` (a key of ``Program.occupancy``)
+    ``held`` sub-cycles in passes ``pass_of`` stand for in a sampled ``program`` (:func:`occupancy`): ``held``
+    over, per pass, the share of the run's load there on the instances the sample reaches
+    (``Program.reached``) and, in a thinned sample, which stands for the GPU on a frame thinned to a share
+    ``theta`` of each pass's work (``Program.thinning``), over ``theta``. Whole sub-cycles, so that the sums
+    do not depend on the order they are added in (a run replayed a chunk of passes at a time)."""
+    return np.rint(held / run_divisor(program, name)[pass_of])
+
+
+def run_divisor(program, name: str) -> np.ndarray:
+    """Per pass, what :func:`run_held` divides a sampled ``program``'s held sub-cycles on unit ``name`` by."""
+    out = np.ones(len(program.passes))
+    if program.thinning is not None:
+        out = out * program.thinning
+    if program.reached is not None and name in program.reached:
+        out = out * program.reached[name]
+    return np.maximum(out, 1e-12)
+
+
 def address_ids(addr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each address as a small integer id, and the operations per distinct address.
 

@@ -20,7 +20,7 @@ import numpy as np
 from gpusim.config import param
 from gpusim.hw.background import background
 from gpusim.hw.memory.level import MemoryLevel, Requests
-from gpusim.hw.unit import FP, div, fp_costs, mod, register_unit
+from gpusim.hw.unit import FP, div, fp_costs, mod, register_unit, run_divisor
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,10 @@ class DramChannel(MemoryLevel):
         # instruction's pass
         self.pool = background(self.program, "memory")
         self.wi_pass = self.program.wi_pass.tolist() if self.pool is not None else None
+        # a sampled program: per instruction, what its held sub-cycles are divided by to stand for the run's
+        # (gpusim.hw.unit.run_held)
+        self.wi_run = (None if self.run_busy_fp is None
+                       else run_divisor(self.program, "memory")[self.program.wi_pass].tolist())
         self._lo = self._hi = self._part = self._cost = self._extra = None
 
     def prepare(self, chunks: list[Requests], write: np.ndarray) -> None:
@@ -133,7 +137,7 @@ class DramChannel(MemoryLevel):
     def serve_request(self, partition: int, cost_fp: int, at_fp: int, held_fp: int, wi: int) -> int:
         start = self.take(partition, at_fp, cost_fp, held_fp - cost_fp, wi)
         if self.run_busy_fp is not None:
-            self.run_busy_fp[partition] += held_fp
+            self.run_busy_fp[partition] += round(held_fp / self.wi_run[wi])
         self.busy_fp[partition] += cost_fp
         self.requests[partition] += 1
         return -(-(start + cost_fp) // FP) + self.latency

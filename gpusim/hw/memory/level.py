@@ -30,7 +30,7 @@ from typing import ClassVar
 import numpy as np
 
 from gpusim.config import param
-from gpusim.hw.unit import Unit, occupancy, register_section
+from gpusim.hw.unit import Unit, occupancy, register_section, run_held
 
 MEMORY_OPS = frozenset({"load", "store", "rmw_read", "rmw_write"})
 SECTOR = 32     # bytes: the granularity of a request's size
@@ -90,10 +90,11 @@ class MemoryLevel(Unit):
         level serves (counted in :attr:`run_busy_fp`), not the next level's."""
         if self.program is None or self.program.occupancy is None:
             return cost_fp
-        held = occupancy(cost_fp, self.program.wi_pass[wi], partition, self.program, "memory")
+        pass_of = self.program.wi_pass[wi]
+        held = occupancy(cost_fp, pass_of, partition, self.program, "memory")
         if mine:
-            self.run_busy_fp = (np.asarray(self.run_busy_fp) + np.bincount(partition, weights=held,
-                                                                             minlength=self.instances)).tolist()
+            run = np.bincount(partition, weights=run_held(held, pass_of, self.program, "memory"), minlength=self.instances)
+            self.run_busy_fp = (np.asarray(self.run_busy_fp) + run).tolist()
         return held
 
     @classmethod

@@ -47,7 +47,8 @@ from __future__ import annotations
 import numpy as np
 
 from gpusim.hw.memory.coalescer import instruction_writes, touched_segments
-from gpusim.hw.unit import div, interleave, mod, within_instance
+from gpusim.hw.memory.level import SECTOR
+from gpusim.hw.unit import FP, div, fp_costs, interleave, mod, within_instance
 from gpusim.jit import compiled_once
 
 HIT, MISS, MISS_DIRTY = 0, 1, 2          # a request's outcome
@@ -207,12 +208,27 @@ class Outcomes:
         # share of it its own lanes carry
         self.miss = np.where(code > 0, 1.0 / lanes, 0.0).astype(np.float32)
         self.dirty = code == MISS_DIRTY
+        # per slice, the run's misses (one per line lookup) and those that evict a dirty line
+        part = segs.set // max(1, segs.sets)
+        self.misses = np.bincount(part, weights=self.miss, minlength=gpu.memory.partitions)
+        self.dirty_misses = np.bincount(part, weights=np.where(self.dirty, self.miss, 0.0),
+                                        minlength=gpu.memory.partitions)
         # the run's segments by thread, for a sample's operations to find theirs
         threads = int(segs.thread.max()) + 1 if len(segs) else 0
         self.offsets = np.append(0, np.cumsum(np.bincount(segs.thread, minlength=threads)))
         self.perm = np.argsort(segs.thread, kind="stable")
         self.wi, self.set, self.tag = segs.wi, segs.set, segs.tag
         self.wi_pass, self.wi_group, self.wi_k = program.wi_pass, program.wi_group, program.wi_k
+
+    def next_level(self, gpu) -> dict:
+        """What the run's misses bring to the DRAM, per partition: ``requests`` (one per miss: the first request
+        to the line, a segment of at least a sector; the instruction's others to the line hit) and
+        ``busy_cycles`` (its bytes, and a dirty line's more where the miss evicts one), as the L2 slice sends
+        them (gpusim.hw.memory.l2)."""
+        nbytes = max(gpu.coalescer.segment_bytes, SECTOR)
+        miss, evict = fp_costs(np.array([nbytes, nbytes + gpu.l2.line_bytes]), gpu.dram.bytes_per_cycle)
+        busy = (self.misses * miss + self.dirty_misses * (evict - miss)) / FP
+        return {"requests": self.misses, "busy_cycles": busy}
 
     def of(self, thread, pass_of, group, k, set_of, tag_of) -> np.ndarray:
         """The run's segment of each of a sample's segments (-1: not an operation of the run): the same
