@@ -54,6 +54,19 @@ def test_a_fraction_of_one_is_the_full_level_with_a_zero_width_interval(spheres,
     assert 0.5 < part["cycles"] / full["cycles"] < 2
 
 
+def test_a_whole_sample_counts_a_multi_pass_schemes_hazards_in_every_pass():
+    # the multi-pass k-buffer reads a pixel's entries again in each pass: more hazards than fragments, which a
+    # sample that keeps the whole run reports as the full level does
+    scene, base = load_scene("stress-layers", ["screen.width=16", "screen.height=16", "objects.1.layers=64"])
+    deep = trace_scene(scene, base, progress=False)
+    full = replay(deep, "multipass-kbuffer", {"k": 4}, "full", load_gpu("gtx280", ["runner.workers=1"]))[1]["timing"]
+    whole = load_gpu("gtx280", ["runner.workers=1", "sample.fraction=1"])
+    sampled = replay(deep, "multipass-kbuffer", {"k": 4}, "sampled", whole)[1]["timing"]
+    assert full["rmw_hazards"] > len(deep.x)
+    assert sampled["rmw_hazards"] == full["rmw_hazards"]
+    assert sampled["rmw_hazard_pixels"] == full["rmw_hazard_pixels"]
+
+
 def test_replicates_are_disjoint_stratified_samples(spheres):
     gpu = load_gpu("gtx280", ["sample.fraction=0.0625"])
     result, _, _ = run_functional(spheres, "kbuffer", {"k": 8})
@@ -289,6 +302,20 @@ def test_with_an_l2_the_drams_figures_are_the_warmings_of_the_run(spheres, schem
     assert units["l2"]["hits"] + units["l2"]["misses"] == units["l2"]["requests"]
     assert units["dram"]["utilisation_mean"] == pytest.approx(
         units["dram"]["busy_cycles"] / (sampled["cycles"] * units["dram"]["instances"]))
+
+
+def test_the_largest_triangles_block_stands_for_itself_alone():
+    # every replicate keeps the block of a software rasterizer's largest triangle, whose warp loops over the
+    # triangle's pixels with its other lanes idle: scaled up with the rest of the sample, it put the SMs' busy
+    # cycles, instructions and the coalesced requests at several times the run's
+    scene, base = load_scene("bunny", ["screen.width=96", "screen.height=96"])
+    bunny = trace_scene(scene, base, progress=False)
+    base = ["runner.workers=1", "sample.min_tiles=1", "sample.tile=4"]
+    full = replay(bunny, "freepipe-mdts", {}, "full", load_gpu("gtx280", base))[1]["timing"]["units"]
+    sampled = replay(bunny, "freepipe-mdts", {}, "sampled", load_gpu("gtx280", base))[1]["timing"]["units"]
+    for unit, key in (("core", "busy_cycles"), ("core", "requests"), ("coalescer", "requests"),
+                      ("coalescer", "bytes"), ("dram", "requests")):
+        assert sampled[unit][key] == pytest.approx(full[unit][key], rel=0.05), (unit, key)
 
 
 def test_the_runs_busy_cycles_count_the_load_on_instances_a_sample_does_not_reach():

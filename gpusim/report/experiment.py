@@ -337,7 +337,10 @@ class _Report:
         if len(hazards):
             hazards = hazards.assign(hazard_error=hazards["hazards"] / hazards["full_hazards"] - 1.0)
             self.add("|hazard error| (fragments that read an obsolete value, against the full level's) over the "
-                     "cases with hazards:", "",
+                     "cases with hazards. The sampled level's are each replicate's, scaled by its share of the "
+                     "read-modify-write fragments; a thinned replicate's SM holds fewer tiles than each of the "
+                     "run's, so the fragments it has in flight lie on fewer pixels and race more often: count "
+                     "hazards at `full`.", "",
                      markdown(error_percentiles(hazards, "hazard_error", ["fidelity", "scheme"]), share), "")
         else:
             self.add("No compared case has RMW hazards at the full level.", "")
