@@ -80,7 +80,15 @@ The method, its assumptions and its measured error are in docs/timing-model.md (
   (:func:`work_check`); the slope's standard error joins the replicates' in
   ``SE``, with its one degree of freedom.
 * Hazards, requests and busy cycles: each replicate's over the share of the
-  work it kept (RMW fragments for hazards, operations for the units), averaged.
+  work it kept (RMW fragments for hazards, at most the run's reads; operations
+  for the units), averaged; the block of a software rasterizer's largest
+  triangle counted once (:func:`certain_figures`). Except: the shared units'
+  and the front end's busy cycles are the run's load on each instance in each
+  pass over the share of it on the instances the sample reaches and over the
+  pass's thinning (gpusim.hw.unit.run_held); the atomic units' and ROPs'
+  requests the census's count of the run's operations; with an L2, the DRAM's
+  requests and busy cycles and the L2's misses its warming's of the whole run
+  (:meth:`Outcomes.next_level`).
 
 A fraction of 1 makes the machine the GPU and every replicate the whole run:
 the full level's figures, and an interval of zero width. A run over
