@@ -490,7 +490,7 @@ def _replicate(work: Workload, rec: dict, passes: list[tuple[int, int]], rmw_kep
         for name, keys in CERTAIN_FIGURES.items():
             for key in keys:
                 mine, whole = rec["units"].get(name, {}).get(key), certain[f"{name}.{key}"]
-                if mine is not None and whole is not None:
+                if mine is not None:
                     out["units"][name][key] = whole + (mine - whole) * (total - c) / (kept - c)
     # at most every read of the run (a multi-pass scheme's fragment reads its pixel in each pass) and every pixel
     reads = sum(int(g.total) for g in work.plan.groups if g.op == "rmw_read")
@@ -512,19 +512,19 @@ def certain_figures(work: Workload, gpu, reps: Replicates, pieces, passes: tuple
     units = Machine(machine, program, work.width).unit_summaries(1)
     out = {"operations": sum(p.operations for p in program.passes)}
     for name, keys in CERTAIN_FIGURES.items():
-        static = name != "dram" or not (gpu.l2.size_bytes and "l2" in gpu.memory.levels)   # (misses: run time)
         for key in keys:
-            out[f"{name}.{key}"] = float(units.get(name, {}).get(key, 0.0)) if static else None
+            out[f"{name}.{key}"] = float(units.get(name, {}).get(key, 0.0))
     return out
 
 
 #: the figures a unit counts before it runs (the ones :func:`certain_figures` corrects): the SMs' issue-port
-#: cycles and instructions, the coalesced requests and their bytes, the DRAM's requests (without an L2)
+#: cycles and instructions, the coalesced requests and their bytes, the DRAM's requests (with an L2, its misses,
+#: counted as the run goes; the sampled record takes them from the L2's warming instead: :func:`_warmed_units`)
 CERTAIN_FIGURES = {"core": ("busy_cycles", "requests"), "coalescer": ("requests", "bytes"), "dram": ("requests",)}
 
 
 def _add_figures(total: dict | None, more: dict) -> dict:
-    return dict(more) if total is None else {k: None if total[k] is None else total[k] + more[k] for k in total}
+    return dict(more) if total is None else {k: total[k] + more[k] for k in total}
 
 
 def _floor(reps: Replicates, r: int | tuple[int, ...]) -> int:
@@ -778,15 +778,16 @@ def _warmed_units(units: dict, dram: dict, cycles: int) -> None:
     scaled up: a sample's requests take the run's misses only as far as its lanes find the run's, and its
     DRAM requests, scaled by its share of the run's bytes, were 50% over to 80% under the full level's on the
     fidelity corpus (where its cycles were within 1%)."""
+    misses = int(round(float(dram["requests"].sum())))
     if "dram" in units:
         busy = dram["busy_cycles"]
         u = units["dram"]
-        u["requests"], u["busy_cycles"] = int(round(float(dram["requests"].sum()))), float(busy.sum())
+        u["requests"], u["busy_cycles"] = misses, float(busy.sum())
         u["utilisation_mean"] = float(busy.mean()) / cycles if cycles else 0.0
         u["utilisation_max"] = float(busy.max()) / cycles if cycles else 0.0
     if "l2" in units and "misses" in units["l2"]:
         u = units["l2"]
-        u["misses"] = int(round(float(dram["requests"].sum())))
+        u["misses"] = misses
         u["hits"] = max(0, int(u["requests"]) - u["misses"])
         u["hit_rate"] = u["hits"] / u["requests"] if u["requests"] else 0.0
 

@@ -350,9 +350,10 @@ class _Report:
                      "level's; units the full run keeps busy). The sampled level gives the shared units' (memory "
                      "path, atomic units, ROPs) and the front end's as the run's, from the run's load on each "
                      "instance in each pass, and with an L2 the DRAM's from its warming of the whole run; the SMs' "
-                     "are its samples' scaled up by their share of the operations, so they carry the samples' "
-                     "warp packing and any unit every replicate keeps whole. The analytic level gives the DRAM's, "
-                     "the atomic units' and the ROPs' from the work its bounds count.", "",
+                     "are its samples' scaled up by their share of the operations (FreePipe's largest triangle's "
+                     "block, which every replicate keeps, counted once), so they carry the samples' warp packing. "
+                     "The analytic level gives the DRAM's, the atomic units' and the ROPs' from the work its bounds "
+                     "count.", "",
                      markdown(error_percentiles(busy, "busy_error", ["fidelity", "unit"]), share), "")
         misses = fidelity_misses(errors, self.stats)
         self.add("#### Cases that miss", "", f"{len(misses)} cases miss their level's error bound (|cycle error| "

@@ -93,7 +93,8 @@ class MemoryLevel(Unit):
         pass_of = self.program.wi_pass[wi]
         held = occupancy(cost_fp, pass_of, partition, self.program, "memory")
         if mine:
-            run = np.bincount(partition, weights=run_held(held, pass_of, self.program, "memory"), minlength=self.instances)
+            run = np.bincount(partition, weights=run_held(held, pass_of, self.program, "memory"),
+                              minlength=self.instances)
             self.run_busy_fp = (np.asarray(self.run_busy_fp) + run).tolist()
         return held
 
