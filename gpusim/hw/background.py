@@ -82,6 +82,46 @@ class Background:
                 start = wait
         return start if start > at else at
 
+    def serve(self, k: int, lo: int, hi: int, part: list[int], cost: list[int], extra: list[int], free: list[int],
+              at: int, starts: list | None) -> int:
+        """:meth:`start` for each of an instruction's cells ``lo`` to ``hi - 1`` (on instance ``part[j]``, ``cost[j]``
+        sub-cycles, bringing ``extra[j]`` to the pool), arriving together at ``at`` in pass ``k``, in order, each
+        instance's free sub-cycle ``free`` moved past its cell (and its start put in ``starts`` where given):
+        the sub-cycle the last one ends. The same arithmetic as :meth:`start` in one call (a DRAM access's
+        cells: the sampled level's most frequent event work)."""
+        if k != self.k:
+            self.k, self.share, self.pool, self.seen = k, self.shares[k], 0.0, [0.0] * self.instances
+            self.last = [at] * self.instances
+        share, seen, last = self.share, self.seen, self.last
+        pool, end = self.pool, 0
+        for j in range(lo, hi):
+            p = part[j]
+            due = (pool - seen[p]) * share[p]
+            span = at - last[p]
+            f = free[p]
+            e = f + int(due)
+            seen[p] = pool
+            last[p] = at
+            pool += extra[j]
+            c = cost[j]
+            if span > 0 and due > 0:
+                rho = due / span
+                if rho > RHO_MAX:
+                    rho = RHO_MAX
+                wait = at + round(rho * c / (2.0 * (1.0 - rho)))
+                if wait > e:
+                    e = wait
+            if e < at:
+                e = at
+            if starts is not None:
+                starts[p] = e
+            e += c
+            free[p] = e
+            if e > end:
+                end = e
+        self.pool = pool
+        return end
+
     def settled(self, free: list[int]) -> list[int]:
         """Each instance's free sub-cycle ``free`` once it has served its share of what is left in the pool (the
         pass's end)."""

@@ -428,8 +428,7 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
                 present |= keep.triangles(np.arange(universe))
         lane_keys = np.flatnonzero(present) + key_lo
         n_lanes = len(lane_keys)
-        # each key's lane rank (None: the key is its rank)
-        rank_of = None if n_lanes == universe and not key_lo else np.cumsum(present) - 1
+        rank_of = _lane_ranks(present, lane_keys, key_lo)
         front = None                     # a pixel shader's lanes as the rasterizer feeds them (FragmentLanes)
         if any(plan.groups[pc.group].op == "scoreboard" for pc in ps):
             pix = work.frag_pixel[lane_keys] if pk.threads == "fragment" else lane_keys
@@ -445,8 +444,9 @@ def lower(work: Workload, gpu, keep=None, passes: tuple[int, int] | None = None,
             # warp_size / 4 quads (4 shader lanes per quad, helper lanes of partial quads included)
             got = fragment_lanes(work, gpu, lane_keys, pk)
             if len(got.keys) > 1 and not bool((got.keys[1:] > got.keys[:-1]).all()):
-                rank_of = np.zeros(universe, np.int64)
-                rank_of[got.keys - key_lo] = np.arange(n_lanes)
+                ranks = np.zeros(universe, np.int64)
+                ranks[got.keys - key_lo] = np.arange(n_lanes)
+                rank_of = lambda key, ranks=ranks: ranks[key - key_lo]     # noqa: E731
             lane_keys, warp_of_lane, front = got.keys, got.warp, got
         else:
             warp_of_lane = None                          # lanes fill warps in order: rank // ws, rank % ws
@@ -692,10 +692,24 @@ class Placement(NamedTuple):
     starts: np.ndarray             # the first row of each instruction
 
 
+def _lane_ranks(present: np.ndarray, lane_keys: np.ndarray, key_lo: int):
+    """Each key's lane rank, its position among ``lane_keys`` (the ascending keys ``present`` marks, from
+    ``key_lo``), as a function of an array of keys; None where every key of the range is a lane (the key is its
+    rank). A sample's few lanes spread over the run's range are looked up, not ranked over the whole range (its
+    cumulative sum, once per pass of every sample, had taken a fifth of a multi-pass scheme's sampled run)."""
+    n_lanes, universe = len(lane_keys), len(present)
+    if n_lanes == universe and not key_lo:
+        return None
+    if n_lanes * 16 < universe:
+        return lambda key: np.searchsorted(lane_keys, key)
+    dense = np.cumsum(present) - 1
+    return lambda key: dense[key - key_lo]
+
+
 def _place(pc: _Piece, key, key_lo: int, rank_of, warp_of_lane, lane_in_warp, j_of, n_warps: int, ws: int,
            lane_bits: int, name: str) -> Placement:
     """Where the rows of piece ``pc`` go (see :class:`Placement`)."""
-    r = key if rank_of is None else rank_of[key - key_lo]
+    r = key if rank_of is None else rank_of(key)
     w = div(r, ws) if warp_of_lane is None else warp_of_lane[r]
     j = j_of[pc.thread] if j_of is not None else None
     k = pc.k

@@ -281,6 +281,7 @@ class Replicates:
         self.seen = np.zeros(len(work.plan.passes), np.int64)   # per pass: the replicates holding one of its rows
         self.lanes: dict[int, tuple] = {}        # pass -> its lanes and the replicates' choice of their warps
         self.units: dict[int, list] = {}         # pass -> the sampling unit of each thread of each group
+        self.keepers: dict[int, list] = {}       # pass -> the replicates keeping each thread of each group (bits)
         self.info = {"tiles": occupied, "tiles_per_replicate": int(self.tiles[0].sum()),
                      "triangle_blocks": int(blocks), "triangle_blocks_per_replicate": int(self.triangles[0].sum())}
 
@@ -304,10 +305,11 @@ class Replicates:
         return held != 0
 
     def prepare(self, pieces) -> None:
-        """Each pass's sampling units (:meth:`units_of`) of the threads of ``pieces`` (of the whole run), as
-        :class:`Keep` asks for them: made now, before the replicates are lowered in processes of their own."""
+        """Each pass's sampling units (:meth:`units_of`) of the threads of ``pieces`` (of the whole run) and the
+        replicates keeping them (:meth:`keepers_of`), as :class:`Keep` asks for them: made now, before the
+        replicates are lowered in processes of their own."""
         for p, js in split_by(np.array([pc.pass_index for pc in pieces], np.int64)):
-            self.units_of(p, [pieces[j].thread for j in js], thread_mapping(self.gpu, self.work.plan.passes[p]))
+            self.keepers_of(p, [pieces[j].thread for j in js])
 
     def tile_of(self, pixel):
         tile = self.gpu.sample.tile
@@ -326,6 +328,34 @@ class Replicates:
                 rank = _ranks(lanes)
                 self.units[p] = [rank(t) // ws for t in threads]
         return self.units[p]
+
+    def keepers_of(self, p: int, threads: list[np.ndarray]) -> list[np.ndarray]:
+        """For each thread of each group of pass ``p``, the replicates that keep it (:class:`Keep`), as bits (bit
+        ``r``: replicate ``r``): made once per pass for every sample of the run (a sample's rows are then a test
+        of its bits, not a gather per replicate). A replicate that would keep none of the pass's units keeps
+        one of them, at random (the unit of a row drawn from all of them)."""
+        if p not in self.keepers:
+            mapping = thread_mapping(self.gpu, self.work.plan.passes[p])
+            units = self.units_of(p, threads, mapping)
+            chosen = (self.triangles if mapping == "triangle" else self.tiles if mapping == "fragment"
+                      else self.lanes[p][1])
+            present = np.zeros(chosen.shape[1], bool)
+            for u in units:
+                present[u] = True
+            dtype = np.dtype(f"uint{max(8, 1 << (self.count - 1).bit_length())}")
+            code = np.zeros(chosen.shape[1], dtype)
+            ends = np.cumsum([len(u) for u in units], dtype=np.int64)
+            total = int(ends[-1]) if len(ends) else 0
+            for r in range(self.count):
+                mine = chosen[r]
+                if not (mine & present).any() and total:      # none kept: one of the pass's units
+                    i = int(np.random.default_rng([self.seed, r, p]).integers(total))
+                    g = int(np.searchsorted(ends, i, side="right"))
+                    mine = np.zeros(len(present), bool)
+                    mine[units[g][i - (int(ends[g - 1]) if g else 0)]] = True
+                code |= mine.astype(dtype) << dtype.type(r)
+            self.keepers[p] = [code[u] for u in units]
+        return self.keepers[p]
 
     def warps(self, p: int, threads: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """A pass whose threads fill warps in order: its lanes (sorted) and the replicates' choice of its warps,
@@ -371,21 +401,8 @@ class Keep:
         self.members = _members(r)
 
     def __call__(self, p: int, threads: list[np.ndarray]) -> list[np.ndarray]:
-        if len(self.members) > 1:
-            parts = [Keep(self.reps, r)(p, threads) for r in self.members]
-            return [np.logical_or.reduce(ms) for ms in zip(*parts)]
-        reps, r = self.reps, self.members[0]
-        mapping = thread_mapping(reps.gpu, reps.work.plan.passes[p])
-        units = reps.units_of(p, threads, mapping)
-        chosen = (reps.triangles if mapping == "triangle" else reps.tiles if mapping == "fragment"
-                  else reps.lanes[p][1])[r]
-        masks = [chosen[u] for u in units]
-        if not any(m.any() for m in masks):       # none kept: one of the pass's units, picked at random
-            every = np.concatenate(units)
-            if len(every):
-                one = every[np.random.default_rng([reps.seed, r, p]).integers(len(every))]
-                masks = [u == one for u in units]
-        return masks
+        bits = sum(1 << r for r in self.members)
+        return [(code & bits) != 0 for code in self.reps.keepers_of(p, threads)]
 
     def triangles(self, ids: np.ndarray) -> np.ndarray:
         """A software rasterizer's triangles (covering a pixel or not) in the replicate's triangle blocks."""

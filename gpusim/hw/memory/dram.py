@@ -89,16 +89,15 @@ class DramChannel(MemoryLevel):
         self._extra = None if held is cost else (held - cost).tolist()
 
     def access(self, wi: int, arrive_fp: int, starts: list | None) -> int:
-        free, part, cost, extra = self.free, self._part, self._cost, self._extra
-        pool = self.pool
-        k = self.wi_pass[wi] if pool is not None else 0
+        free, part, cost = self.free, self._part, self._cost
+        if self.pool is not None:               # each partition's share of the rest of the GPU's requests first
+            end = self.pool.serve(self.wi_pass[wi], self._lo[wi], self._hi[wi], part, cost, self._extra, free,
+                                  arrive_fp, starts)
+            return -(-end // FP) + self.latency
         end = 0
         for j in range(self._lo[wi], self._hi[wi]):
             p = part[j]
-            if pool is not None:                # the partition's share of the rest of the GPU's requests first
-                e = pool.start(k, p, free[p], arrive_fp, extra[j], cost[j])
-            else:
-                e = free[p] if free[p] > arrive_fp else arrive_fp
+            e = free[p] if free[p] > arrive_fp else arrive_fp
             if starts is not None:
                 starts[p] = e                   # an instruction has one cell per partition it reaches
             e += cost[j]
