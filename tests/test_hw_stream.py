@@ -143,3 +143,23 @@ def _same_sampled_figures_streamed(small, scheme, params, options) -> dict:
     assert out[0] == out[1] == out[2]
     assert out[0]["sample"]["share"] < 1 and out[0]["cycles_ci95_low"] < out[0]["cycles_ci95_high"]
     return out[0]
+
+
+@pytest.mark.parametrize("passes", [1, 3])
+def test_a_samples_own_windows_count_the_hazards_of_the_runs_windows(passes):
+    """A sample's RMW windows over its own threads (hazards.rmw_windows, own=True) count the same hazards and
+    hazard pixels as the windows over every thread of the run, in one pass and in several."""
+    from gpusim.hw.hazards import count_hazards, rmw_windows
+    rng = np.random.default_rng(passes)
+    threads, n = 5000, 900
+    pixel = rng.integers(0, 40, threads)
+    who = rng.choice(threads, n, replace=False)          # a sample's few threads of the run's
+    p = rng.integers(0, passes, n)
+    read_at = rng.integers(0, 500, n)
+    write_at = read_at + rng.integers(1, 200, n)
+    reads, writes = (p, who, read_at), (p, who, write_at)
+    dense = count_hazards(pixel, *rmw_windows(reads, writes, threads))
+    read, write, ids = rmw_windows(reads, writes, threads, own=True)
+    assert len(ids) == n and read.shape[-1] == n
+    assert count_hazards(pixel[ids], read, write) == dense
+    assert dense[0] > 0                                  # the case has hazards to count

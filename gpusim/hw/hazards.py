@@ -32,14 +32,23 @@ def rmw_operations(program: Program, machine):
     return tuple((row_pass[m], rows.thread[m], service[m]) for m in (rows.op == RMW_READ, rows.op == RMW_WRITE))
 
 
-def rmw_windows(reads: tuple, writes: tuple, threads: int):
+def rmw_windows(reads: tuple, writes: tuple, threads: int, own: bool = False):
     """(read cycle, write cycle) of each fragment thread (-1 where it has no RMW), from the RMW operations
     (:func:`rmw_operations`; a run replayed a chunk of passes at a time gathers them from each chunk).
 
     A thread that read-modify-writes in several passes (a multi-pass k-buffer's peel passes) has a window in
     each, and passes are barriers: then both are (passes, threads) arrays, a row per pass that holds RMW
-    operations, in pass order."""
+    operations, in pass order.
+
+    ``own``: the windows of the threads the operations name only (a sample's, a few of the run's ``threads``),
+    and those threads, ascending: (read, write, threads). (A row per pass over every thread of the run took
+    a multi-pass sample longer to fill than its hazards took to count.)"""
     (read_pass, read_thread, read_at), (write_pass, write_thread, write_at) = reads, writes
+    if own:
+        ids = np.unique(np.concatenate([read_thread, write_thread]))
+        reads = read_pass, np.searchsorted(ids, read_thread), read_at
+        writes = write_pass, np.searchsorted(ids, write_thread), write_at
+        return (*rmw_windows(reads, writes, len(ids)), ids)
     slot, passes = _pass_slots(np.concatenate([read_pass, write_pass]), np.concatenate([read_thread, write_thread]),
                                threads)
     read = np.full((passes, threads), np.iinfo(np.int64).max, np.int64)
@@ -67,11 +76,11 @@ def _pass_slots(rp: np.ndarray, th: np.ndarray, threads: int):
     return np.searchsorted(passes, rp), len(passes)
 
 
-def machine_windows(program: Program, machine, threads: int):
-    """The RMW windows (:func:`rmw_windows`) of a program a machine replayed, or None when it served no RMW
-    instruction."""
+def machine_windows(program: Program, machine, threads: int, own: bool = False):
+    """The RMW windows (:func:`rmw_windows`, of its own threads where ``own``) of a program a machine replayed,
+    or None when it served no RMW instruction."""
     ops = rmw_operations(program, machine)
-    return None if ops is None else rmw_windows(*ops, threads)
+    return None if ops is None else rmw_windows(*ops, threads, own)
 
 
 def count_hazards(pixel: np.ndarray, read: np.ndarray, write: np.ndarray) -> tuple[int, int]:

@@ -976,7 +976,7 @@ def run_sampled(work: Workload, gpu, result=None, reference=None) -> tuple[dict,
         else:
             fit = [fitted_sms(gpu, 1, 1, floor) for _, floor in members]
         spent["run"] = time.perf_counter() - start
-        streams = [StreamedRun(work, gpu.runner.max_cycles) for _ in members]
+        streams = [StreamedRun(work, gpu.runner.max_cycles, sampled=True) for _ in members]
         ops: list[list] = [[] for _ in members]
         readers: list[list] = [[] for _ in members]
         thetas: list[list] = [[] for _ in members]

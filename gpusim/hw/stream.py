@@ -113,8 +113,13 @@ class StreamedRun:
     RMW operations on the run's timeline. :func:`run_streamed` feeds it the full level's chunks; the sampled
     level (gpusim.hw.sample) a replicate's sample of each chunk."""
 
-    def __init__(self, work, limit_cycles: int):
-        self.work, self.limit = work, limit_cycles
+    def __init__(self, work, limit_cycles: int, sampled: bool = False):
+        """``sampled``: the run is a sample of the sampled level's. A full run's machine, about 80 bytes per
+        operation, is freed (a full collection) before the next chunk's is built; a sample's is small, and the
+        collection, a pass over every object of the process, cost the level 4-6% of its wall time, so its
+        machines are left to the collector's own passes. A sample's RMW windows are its own threads'
+        (:meth:`windows`)."""
+        self.work, self.limit, self.sampled = work, limit_cycles, sampled
         self.passes: list[tuple] = []             # (name, kind, cycles, warps) of each pass so far
         self.holders: dict[str, object] = {}      # unit name -> the run's counts (detached units, absorbed)
         self.instructions = self.operations = 0
@@ -147,7 +152,8 @@ class StreamedRun:
         if ops is not None:                   # on the run's passes and timeline
             self.rmw.append([(p + first, thread, at + chunk_start) for p, thread, at in ops])
         del machine, u
-        gc.collect()                          # the units and the machine refer to each other
+        if not self.sampled:
+            gc.collect()                      # the units and the machine refer to each other
 
     def units(self, gpu) -> dict:
         """The units holding the run's counts, in machine order."""
@@ -155,11 +161,12 @@ class StreamedRun:
         return {name: self.holders[name] for name in sorted(self.holders, key=order.index)}
 
     def windows(self):
-        """The RMW windows (gpusim.hw.hazards.rmw_windows) of the run, or None without RMW operations."""
+        """The RMW windows (gpusim.hw.hazards.rmw_windows) of the run (a sample's: of its own threads), or None
+        without RMW operations."""
         if not self.rmw:
             return None
         reads, writes = ([np.concatenate(col) for col in zip(*(chunk[k] for chunk in self.rmw))] for k in (0, 1))
-        return rmw_windows(reads, writes, len(self.work.frag_pixel))
+        return rmw_windows(reads, writes, len(self.work.frag_pixel), self.sampled)
 
 
 def run_streamed(work, gpu, chunks: list[tuple[int, int]], progress=None):

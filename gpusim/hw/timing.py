@@ -41,15 +41,15 @@ def _finish(rec: dict, gpu, cycles: int) -> dict:
 
 
 def _hazards(rec: dict, windows, work: Workload, result, reference):
-    """RMW hazards from the event times (the RMW ``windows``, or None), and the image replayed in event
-    order."""
+    """RMW hazards from the event times (the RMW ``windows``, or None; a sample's: windows of its own threads,
+    and those threads), and the image replayed in event order (a whole run's)."""
     rec["rmw_hazards"], rec["rmw_hazard_pixels"] = 0, 0
     if windows is None:
         return None
-    read, write = windows
-    h, hp = count_hazards(work.frag_pixel, read, write)
+    read, write, *own = windows
+    h, hp = count_hazards(work.frag_pixel[own[0]] if own else work.frag_pixel, read, write)
     rec["rmw_hazards"], rec["rmw_hazard_pixels"] = int(h), int(hp)
-    replay = result.extras.get("rmw_replay") if result is not None else None
+    replay = result.extras.get("rmw_replay") if result is not None and not own else None
     if replay is None:
         return None
     image, stats = replay(read, write)
@@ -81,7 +81,7 @@ def run_full(work: Workload, gpu, result=None, reference=None, program: Program 
     rec["units_built"] = machine.built_units()
     rec["units"] = machine.unit_summaries(total)
     rec["unit_stats"] = machine.unit_stats(total)
-    image = _hazards(rec, machine_windows(program, machine, len(work.frag_pixel)), work,
+    image = _hazards(rec, machine_windows(program, machine, len(work.frag_pixel), own=sampled), work,
                      None if sampled else result, reference)
     rec["event_seconds"] = time.perf_counter() - start
     return _finish(rec, gpu, total), image
