@@ -159,7 +159,18 @@ class _Piece:
 
 
 def pass_operations(plan: OpPlan) -> np.ndarray:
-    """Memory operations of each pass of ``plan``, expanding only groups whose passes a function gives."""
+    """Memory operations of each pass of ``plan``, expanding only groups whose passes a function gives; counted
+    once per plan (kept on it, for as long as it has these groups and passes: a sampled run lowers each of its
+    samples a chunk of passes at a time, and counting them again for each had taken a fifth of its time)."""
+    known = plan.__dict__.get("_pass_operations")
+    if known is not None and known[0] == (len(plan.groups), len(plan.passes)):
+        return known[1].copy()
+    out = _count_pass_operations(plan)
+    plan.__dict__["_pass_operations"] = ((len(plan.groups), len(plan.passes)), out.copy())
+    return out
+
+
+def _count_pass_operations(plan: OpPlan) -> np.ndarray:
     out = np.zeros(len(plan.passes), np.int64)
     for g in plan.memory_groups:
         if g.seq_pass is not None:            # op s of every thread with more than s of them, in seq_pass[s]

@@ -629,12 +629,15 @@ def _traffic_warps(work: Workload, gpu, pieces: list, p0: int, n_pass: int, load
     masks: list = [None] * len(pieces)
     scale = np.ones((n_pass, parts))
     chosen: dict[int, np.ndarray] = {}
+    last = None                   # the last pass's lanes and their warps
     for p, js in ([] if stride == 1 else split_by(np.array([pc.pass_index for pc in pieces], np.int64))):
         ps = [pieces[j] for j in js]
         if any(work.plan.groups[pc.group].op == "scoreboard" for pc in ps):
             continue
         lanes = _distinct([pc.thread for pc in ps])
-        warp, _ = submission_warps(work, gpu, lanes)
+        if last is None or not np.array_equal(lanes, last[0]):   # a multi-pass scheme's passes share their lanes
+            last = lanes, submission_warps(work, gpu, lanes)[0]
+        warp = last[1]
         if int(warp[-1]) + 1 < MIN_TRAFFIC_WARPS * stride:
             continue
         # one warp at random of each block of stride consecutive ones: spread over the pass as systematic
