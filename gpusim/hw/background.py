@@ -63,32 +63,22 @@ class Background:
     def start(self, k: int, p: int, free: int, at: int, extra: int, cost: int) -> int:
         """The sub-cycle instance ``p``, free from sub-cycle ``free``, starts a sample's request of ``cost``
         sub-cycles arriving at ``at`` in pass ``k``, which brings ``extra`` sub-cycles of the rest of the GPU's
-        to the pool: after the instance's share of what the pool gained since it last served, as a fluid that
-        came in since then (a backlog only where it came faster than the instance serves), or after the mean
-        wait among those requests arriving at random (M/D/1), whichever is later."""
-        if k != self.k:                   # passes are barriers: the last one's pool was settled at its end
-            self.k, self.share, self.pool, self.seen = k, self.shares[k], 0.0, [0.0] * self.instances
-            self.last = [at] * self.instances
-        pool = self.pool
-        due = (pool - self.seen[p]) * self.share[p]
-        span = at - self.last[p]
-        start = free + int(due)
-        self.seen[p], self.last[p] = pool, at
-        self.pool = pool + extra
-        if span > 0 and due > 0:
-            rho = min(due / span, RHO_MAX)
-            wait = at + round(rho * cost / (2.0 * (1.0 - rho)))
-            if wait > start:
-                start = wait
-        return start if start > at else at
+        to the pool (:meth:`serve` of one cell)."""
+        frees = [0] * self.instances
+        frees[p] = free
+        return self.serve(k, 0, 1, [p], [cost], [extra], frees, at, None) - cost
 
     def serve(self, k: int, lo: int, hi: int, part: list[int], cost: list[int], extra: list[int], free: list[int],
               at: int, starts: list | None) -> int:
-        """:meth:`start` for each of an instruction's cells ``lo`` to ``hi - 1`` (on instance ``part[j]``, ``cost[j]``
-        sub-cycles, bringing ``extra[j]`` to the pool), arriving together at ``at`` in pass ``k``, in order, each
-        instance's free sub-cycle ``free`` moved past its cell (and its start put in ``starts`` where given):
-        the sub-cycle the last one ends. The same arithmetic as :meth:`start` in one call (a DRAM access's
-        cells: the sampled level's most frequent event work)."""
+        """Serve an instruction's cells ``lo`` to ``hi - 1`` of a sample's requests arriving together at sub-cycle
+        ``at`` in pass ``k``, in order: cell ``j`` on instance ``part[j]``, free from ``free[part[j]]``, takes
+        ``cost[j]`` sub-cycles and brings ``extra[j]`` of the rest of the GPU's to the pool. Each starts after its
+        instance's share of what the pool gained since the instance last served, as a fluid that came in since
+        then (a backlog only where it came faster than the instance serves), or after the mean wait among those
+        requests arriving at random (M/D/1), whichever is later, and not before ``at``. Moves each ``free`` past
+        its cell and puts its start in ``starts`` where given; returns the sub-cycle the last one ends. (One
+        call for all of an instruction's cells: a DRAM access's are the sampled level's most frequent event
+        work.)"""
         if k != self.k:
             self.k, self.share, self.pool, self.seen = k, self.shares[k], 0.0, [0.0] * self.instances
             self.last = [at] * self.instances
