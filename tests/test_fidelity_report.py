@@ -244,4 +244,6 @@ def test_the_sampled_levels_wall_time_is_split_on_the_speed_cases():
     assert row["run_share"] == pytest.approx(0.2 / wall) and row["events_share"] == pytest.approx(0.15 / wall)
     assert row["other_share"] == pytest.approx((wall - 0.45) / wall)     # the wall time in none of the parts
     assert row["speedup_samples_free"] == pytest.approx(big["full_wall_seconds"] / (wall - 0.25))
+    # the share of their 0.25 s the samples may keep for 10x: what a tenth of full leaves after the rest
+    assert row["samples_budget"] == pytest.approx(max(0.0, (big["full_wall_seconds"] / 10 - (wall - 0.25)) / 0.25))
     assert sampled_wall_parts(errors, stats.iloc[:0]).empty

@@ -260,6 +260,7 @@ class _Report:
             return
         run, events = parts["run_share"].median(), parts["events_share"].median()
         free = parts["speedup_samples_free"].median()
+        budget = parts["samples_budget"]
         self.add("#### Where the sampled level's time goes", "",
                  f"On the {counted(len(parts), 'sampled case')} the speed targets count, the level spent a median "
                  f"{run:.0%} of its wall time on the whole run (counting every operation of it for the shared units' "
@@ -270,14 +271,19 @@ class _Report:
                  + (", still short of the 10x target: the speed-up is bounded by the run's own part, not by the "
                     "sample's size." if free < 10 else
                     ": the samples' lowering and events, not the run's own part, keep it from the 10x target."
-                    if parts["speedup"].median() < 10 else "."), "")
+                    if parts["speedup"].median() < 10 else ".")
+                 + (f" To reach 10x, a case's samples would have to cost a median {budget.median():.0%} of what they "
+                    f"cost here ({counted(int((budget <= 0).sum()), 'case')} where the run's own part alone takes "
+                    "more than a tenth of the full level's time)." if parts["speedup"].median() < 10 else ""), "")
         table = parts.rename(columns={"full_wall_seconds": "full (s)", "wall_seconds": "sampled (s)",
                                       "speedup": "speed-up", "run_share": "whole run",
                                       "programs_share": "samples lowered", "events_share": "samples replayed",
-                                      "other_share": "rest", "speedup_samples_free": "speed-up, samples free"})
+                                      "other_share": "rest", "speedup_samples_free": "speed-up, samples free",
+                                      "samples_budget": "samples' cost for 10x"})
         self.add("<details><summary>per case</summary>", "",
                  markdown(table, {"speed-up": "x", "speed-up, samples free": "x", "whole run": "share",
-                                  "samples lowered": "share", "samples replayed": "share", "rest": "share"}),
+                                  "samples lowered": "share", "samples replayed": "share", "rest": "share",
+                                  "samples' cost for 10x": "share"}),
                  "", "</details>", "")
 
     def fidelity_detail(self, errors: pd.DataFrame) -> None:

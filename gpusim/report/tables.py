@@ -168,7 +168,9 @@ def sampled_wall_parts(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFram
     """Per sampled case of :func:`fast_cases` whose record splits its wall time (``sample.wall_seconds``): the
     full and sampled wall times, each part's share of the sampled level's (the whole run, the samples' lowering,
     their events, the rest), and the speed-up the level would have with its samples free (the full level's
-    wall time over the run's part and the rest): what a smaller or faster sample can still buy."""
+    wall time over the run's part and the rest): what a smaller or faster sample can still buy; and the share of
+    their cost the samples may keep for the case to reach the level's speed-up target (:data:`FIDELITY_TARGETS`),
+    0 where the run's part alone misses it, 1 or more where the case meets it already."""
     runs = fast_cases(errors)
     runs = runs[runs["fidelity"] == "sampled"]
     sel = stats[(stats["unit"] == "sample") & (stats["stat"] == "wall_seconds")]
@@ -188,8 +190,19 @@ def sampled_wall_parts(errors: pd.DataFrame, stats: pd.DataFrame) -> pd.DataFram
                      "speedup": e["speedup"], "run_share": p.get("run", 0.0) / wall,
                      "programs_share": p.get("programs", 0.0) / wall, "events_share": p.get("events", 0.0) / wall,
                      "other_share": rest / wall,
-                     "speedup_samples_free": e["full_wall_seconds"] / fixed if fixed > 0 else math.nan})
+                     "speedup_samples_free": e["full_wall_seconds"] / fixed if fixed > 0 else math.nan,
+                     "samples_budget": _samples_budget(e["full_wall_seconds"], fixed,
+                                                       p.get("programs", 0.0) + p.get("events", 0.0))})
     return pd.DataFrame(rows)
+
+
+def _samples_budget(full: float, fixed: float, samples: float) -> float:
+    """The share of their cost ``samples`` (seconds) may keep for a sampled run whose other parts take ``fixed``
+    to reach the sampled speed-up target over a full run of ``full`` seconds (0: the other parts alone miss it)."""
+    target = next(b for level, measure, b, _ in FIDELITY_TARGETS if level == "sampled" and "speed-up" in measure)
+    if samples <= 0:
+        return math.nan
+    return max(0.0, (full / target - fixed) / samples)
 
 
 def fidelity_targets(errors: pd.DataFrame) -> pd.DataFrame:
