@@ -163,3 +163,19 @@ def test_a_samples_own_windows_count_the_hazards_of_the_runs_windows(passes):
     assert len(ids) == n and read.shape[-1] == n
     assert count_hazards(pixel[ids], read, write) == dense
     assert dense[0] > 0                                  # the case has hazards to count
+
+
+def test_a_plans_pass_operations_are_counted_again_once_it_changes():
+    """pass_operations keeps its count on the plan: the same count each time (a copy a caller may change), and
+    a new count once the plan has another group or pass."""
+    from gpusim.opplan import OpPlan, Pass
+    plan = OpPlan([Pass("a", "geometry", "fragment"), Pass("b", "fullscreen", "pixel")], ["s"])
+    plan.add(0, "load", "s", np.arange(5), 2, lambda i, s: i * 4 + s, 4)
+    first = pass_operations(plan)
+    assert first.tolist() == [10, 0]
+    first[0] = -1                                        # the caller's copy, not the kept count
+    assert pass_operations(plan).tolist() == [10, 0]
+    plan.add(1, "store", "s", np.arange(3), 1, lambda i, s: i * 4, 4)
+    assert pass_operations(plan).tolist() == [10, 3]
+    plan.passes.append(Pass("c", "fullscreen", "pixel"))
+    assert pass_operations(plan).tolist() == [10, 3, 0]

@@ -36,6 +36,8 @@ held behind), and LucidRaster's latency-bound passes there came out 3% further o
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 
@@ -63,13 +65,12 @@ class Background:
     def start(self, k: int, p: int, free: int, at: int, extra: int, cost: int) -> int:
         """The sub-cycle instance ``p``, free from sub-cycle ``free``, starts a sample's request of ``cost``
         sub-cycles arriving at ``at`` in pass ``k``, which brings ``extra`` sub-cycles of the rest of the GPU's
-        to the pool (:meth:`serve` of one cell)."""
-        frees = [0] * self.instances
-        frees[p] = free
-        return self.serve(k, 0, 1, [p], [cost], [extra], frees, at, None) - cost
+        to the pool (:meth:`serve` of one cell; its free sub-cycle held alone, not a list of every instance's
+        made for each request: the atomic units' and L2 misses' channel requests come through here)."""
+        return self.serve(k, 0, 1, (p,), (cost,), (extra,), {p: free}, at, None) - cost
 
-    def serve(self, k: int, lo: int, hi: int, part: list[int], cost: list[int], extra: list[int], free: list[int],
-              at: int, starts: list | None) -> int:
+    def serve(self, k: int, lo: int, hi: int, part: Sequence[int], cost: Sequence[int], extra: Sequence[int],
+              free: list[int] | dict[int, int], at: int, starts: list | None) -> int:
         """Serve an instruction's cells ``lo`` to ``hi - 1`` of a sample's requests arriving together at sub-cycle
         ``at`` in pass ``k``, in order: cell ``j`` on instance ``part[j]``, free from ``free[part[j]]``, takes
         ``cost[j]`` sub-cycles and brings ``extra[j]`` of the rest of the GPU's to the pool. Each starts after its
